@@ -1,0 +1,1 @@
+"""fitting: iterative fits of jsss models to data (Gaussian sums, medium parameters)."""

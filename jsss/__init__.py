@@ -1,0 +1,20 @@
+"""jsss: differentiable subsurface scattering in JAX.
+
+Public modules: :mod:`jsss.dipole`, :mod:`jsss.single_scattering`, :mod:`jsss.brdf`,
+:mod:`jsss.fresnel`, :mod:`jsss.materials`. Lengths in mm, coefficients in 1/mm.
+"""
+
+from . import brdf, dipole, fresnel, materials, numerics, single_scattering
+from .medium import Medium as Medium
+from .medium import reduced_albedo as reduced_albedo
+
+__all__ = [
+    "Medium",
+    "brdf",
+    "dipole",
+    "fresnel",
+    "materials",
+    "numerics",
+    "reduced_albedo",
+    "single_scattering",
+]

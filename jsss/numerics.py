@@ -1,0 +1,92 @@
+"""Numerical building blocks shared by the physics modules.
+
+Square roots whose derivative is finite at zero, checks that only run on concrete
+(non-traced) values, dtype handling, and the float32 accuracy warning. Nothing here
+changes JAX's global configuration.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = [
+    "LowPrecisionWarning",
+    "append_axes",
+    "as_float_array",
+    "is_concrete",
+    "safe_sqrt",
+    "warn_if_low_precision",
+]
+
+
+class LowPrecisionWarning(UserWarning):
+    """A computation was asked for in a dtype that cannot reach its documented accuracy."""
+
+
+def is_concrete(value) -> bool:
+    """True when ``value`` holds numbers now (not a tracer inside jit/vmap/grad)."""
+    leaves = jax.tree_util.tree_leaves(value)
+    return not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
+
+
+def as_float_array(value) -> jax.Array:
+    """``value`` as a floating-point ``jnp`` array, keeping a float dtype it already has.
+
+    Python and integer inputs become JAX's default float (float64 under
+    ``jax_enable_x64``, float32 otherwise); float32 stays float32.
+    """
+    value = jnp.asarray(value)
+    if jnp.issubdtype(value.dtype, jnp.floating):
+        return value
+    return value.astype(jnp.result_type(float))
+
+
+@jax.custom_jvp
+def safe_sqrt(x):
+    r"""Square root of ``max(x, 0)`` whose derivative stays finite at ``x = 0``.
+
+    The derivative :math:`1 / (2\sqrt{x})` is evaluated at ``max(x, tiny)`` with
+    ``tiny`` the smallest normal number of the dtype. At ``x = 0`` it is therefore a
+    large finite number (about 6.7e153 in float64, 4.6e18 in float32) standing in
+    for the true ``+inf``; a zero tangent gives an exact zero, never ``0 * inf = nan``.
+    """
+    return jnp.sqrt(jnp.maximum(x, 0))
+
+
+@safe_sqrt.defjvp
+def _safe_sqrt_jvp(primals, tangents):
+    (x,), (t,) = primals, tangents
+    tiny = jnp.finfo(jnp.result_type(x)).tiny
+    return safe_sqrt(x), t / (2 * jnp.sqrt(jnp.maximum(x, tiny)))
+
+
+def warn_if_low_precision(array, *, what: str, needs: str) -> None:
+    """Warn with :class:`LowPrecisionWarning` when ``array`` is below float64.
+
+    Parameters
+    ----------
+    array : array_like
+        The array whose dtype the computation runs in.
+    what : str
+        The function or quantity, named in the message.
+    needs : str
+        The documented accuracy that float32 cannot reach, named in the message.
+    """
+    dtype = jnp.result_type(array)
+    if jnp.issubdtype(dtype, jnp.floating) and np.finfo(dtype).bits < 64:
+        warnings.warn(
+            f"{what} runs in {np.dtype(dtype).name} and cannot reach {needs}; "
+            "pass float64 arrays (enable jax_enable_x64) for that accuracy.",
+            LowPrecisionWarning,
+            stacklevel=3,
+        )
+
+
+def append_axes(x, ndim: int):
+    """``x`` reshaped to ``x.shape + (1,) * ndim`` so it broadcasts against channel axes."""
+    x = jnp.asarray(x)
+    return x.reshape(x.shape + (1,) * ndim)

@@ -1,0 +1,118 @@
+r"""Single scattering under a flat surface (Jensen et al. 2001 sec. 2.2 and 2.4).
+
+Directions are unit 3-vectors in the local frame of the surface, normal along +z,
+both pointing *away* from the surface (towards the light and towards the viewer).
+The medium's single-scattering coefficients follow from the reduced ones and the
+Henyey-Greenstein asymmetry ``g``: :math:`\sigma_s = \sigma_s' / (1 - g)`,
+:math:`\sigma_t = \sigma_a + \sigma_s`, albedo :math:`\alpha = \sigma_s/\sigma_t`.
+
+Batch shapes: directions of shape ``S + (3,)`` with a medium of shape ``C`` give
+results of shape ``S + C``.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from .fresnel import fresnel_transmittance, refracted_cosine
+from .medium import Medium
+from .numerics import append_axes, as_float_array, is_concrete
+
+__all__ = [
+    "henyey_greenstein",
+    "single_scattering",
+    "single_scattering_brdf",
+]
+
+
+def henyey_greenstein(cos_theta, g):
+    r"""Henyey-Greenstein phase function, normalised over the sphere [1/sr].
+
+    .. math:: p(\cos\theta) = \frac{1}{4\pi}\frac{1 - g^2}{(1 + g^2 - 2 g\cos\theta)^{3/2}}
+
+    ``cos_theta`` is the cosine between the propagation directions before and after
+    scattering, so ``g > 0`` scatters forward. ``g`` in (-1, 1); ``g = 0`` is isotropic.
+    """
+    cos_theta = as_float_array(cos_theta)
+    denom = 1 + g**2 - 2 * g * cos_theta
+    return (1 - g**2) / (4 * jnp.pi * denom * jnp.sqrt(denom))
+
+
+def _check_g(g):
+    if is_concrete(g):
+        value = np.asarray(g, dtype=float)
+        if not np.all(np.isfinite(value)) or np.any(np.abs(value) >= 1):
+            raise ValueError(
+                f"g (the Henyey-Greenstein mean cosine) must lie in (-1, 1); got {g!r}."
+            )
+
+
+def _geometry(medium, omega_i, omega_o):
+    """Refracted cosines, the phase-angle cosine and the Fresnel product F = Ft_i Ft_o."""
+    omega_i = as_float_array(omega_i)
+    omega_o = as_float_array(omega_o)
+    n = len(medium.shape)
+    cos_i = append_axes(omega_i[..., 2], n)
+    cos_o = append_axes(omega_o[..., 2], n)
+    tangential_dot = append_axes(jnp.sum(omega_i[..., :2] * omega_o[..., :2], axis=-1), n)
+    eta = medium.eta
+    cos_i_in = refracted_cosine(cos_i, eta)
+    cos_o_in = refracted_cosine(cos_o, eta)
+    # Propagation inside: incoming travels (-w_i,xy / eta, -cos_i'), outgoing (w_o,xy / eta, cos_o').
+    cos_phase = -tangential_dot / eta**2 - cos_i_in * cos_o_in
+    fresnel = fresnel_transmittance(cos_i, eta) * fresnel_transmittance(cos_o, eta)
+    return cos_i_in, cos_o_in, cos_phase, fresnel
+
+
+def _coefficients(medium, g):
+    sigma_s = medium.sigma_s_prime / (1 - g)
+    sigma_t = medium.sigma_a + sigma_s
+    return sigma_s, sigma_t
+
+
+def single_scattering(medium: Medium, s, omega_i, omega_o, *, g=0.0):
+    r"""Integrand of Jensen eq. 6: single-scattered radiance per unit path length.
+
+    Light refracts in along :math:`\omega_i'`, scatters once at distance ``s`` along
+    the refracted outgoing ray, and leaves along :math:`\omega_o`. For a flat surface
+    the incoming path inside is :math:`s\,G` with :math:`G = |n\cdot\omega_o'|/|n\cdot\omega_i'|`, so
+
+    .. math:: \frac{dL_o}{ds} = \sigma_s\,F\,p(\omega_i'\cdot\omega_o')\,e^{-\sigma_{t}(1 + G) s}\,L_i
+
+    with :math:`F = F_t(\eta,\omega_i)F_t(\eta,\omega_o)`. Returned per unit incident
+    radiance, in 1/mm/sr.
+
+    Parameters
+    ----------
+    medium : Medium
+    s : array_like, mm
+        Distance along the refracted outgoing ray, >= 0; broadcast against the batch
+        shape of the directions.
+    omega_i, omega_o : array_like, shape ``S + (3,)``
+        Unit directions away from the surface (z > 0).
+    g : float, keyword-only
+        Henyey-Greenstein mean cosine in (-1, 1).
+    """
+    _check_g(g)
+    cos_i_in, cos_o_in, cos_phase, fresnel = _geometry(medium, omega_i, omega_o)
+    sigma_s, sigma_t = _coefficients(medium, g)
+    geometry_factor = cos_o_in / cos_i_in
+    s = append_axes(as_float_array(s), len(medium.shape))
+    attenuation = jnp.exp(-sigma_t * (1 + geometry_factor) * s)
+    return sigma_s * fresnel * henyey_greenstein(cos_phase, g) * attenuation
+
+
+def single_scattering_brdf(medium: Medium, omega_i, omega_o, *, g=0.0):
+    r"""Single-scattering BRDF of a semi-infinite medium (Hanrahan & Krueger; Jensen sec. 2.4).
+
+    .. math:: f_r^{(1)} = \alpha\,F\,\frac{p(\omega_i'\cdot\omega_o')}{|n\cdot\omega_i'| + |n\cdot\omega_o'|}
+
+    the integral of :func:`single_scattering` over ``s`` divided by
+    :math:`|n\cdot\omega_i'|`. Units 1/sr.
+    """
+    _check_g(g)
+    cos_i_in, cos_o_in, cos_phase, fresnel = _geometry(medium, omega_i, omega_o)
+    sigma_s, sigma_t = _coefficients(medium, g)
+    albedo = sigma_s / sigma_t
+    return albedo * fresnel * henyey_greenstein(cos_phase, g) / (cos_i_in + cos_o_in)

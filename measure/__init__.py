@@ -1,0 +1,1 @@
+"""measure: HDR beam-profile images in, medium parameter tables out."""
