@@ -1,10 +1,11 @@
 """jsss: differentiable subsurface scattering in JAX.
 
 Public modules: :mod:`jsss.dipole`, :mod:`jsss.single_scattering`, :mod:`jsss.brdf`,
-:mod:`jsss.fresnel`, :mod:`jsss.materials`. Lengths in mm, coefficients in 1/mm.
+:mod:`jsss.fresnel`, :mod:`jsss.materials`,
+:mod:`jsss.multipole`, :mod:`jsss.hankel`, :mod:`jsss.layers`. Lengths in mm, coefficients in 1/mm.
 """
 
-from . import brdf, dipole, fresnel, materials, numerics, single_scattering
+from . import brdf, dipole, fresnel, hankel, layers, materials, multipole, numerics, single_scattering
 from .medium import Medium as Medium
 from .medium import reduced_albedo as reduced_albedo
 
@@ -13,7 +14,10 @@ __all__ = [
     "brdf",
     "dipole",
     "fresnel",
+    "hankel",
+    "layers",
     "materials",
+    "multipole",
     "numerics",
     "reduced_albedo",
     "single_scattering",

@@ -46,6 +46,7 @@ __all__ = [
     "profile",
     "reduced_albedo_from_reflectance",
     "source_depths",
+    "spectrum",
     "total_reflectance",
 ]
 
@@ -148,6 +149,33 @@ def total_reflectance(medium: Medium):
     z_r, z_v = source_depths(medium)
     sigma_tr = medium.sigma_tr
     return 0.5 * medium.reduced_albedo * (jnp.exp(-sigma_tr * z_r) + jnp.exp(-sigma_tr * z_v))
+
+
+def spectrum(medium: Medium, k):
+    r"""Hankel transform of the profile, :math:`2\pi\int_0^\infty R_d(r) J_0(kr)\,r\,dr`.
+
+    Each pole transforms in closed form, :math:`\tfrac{1}{2}e^{-z\beta}` with
+    :math:`\beta = \sqrt{k^2 + \sigma_{tr}^2}`, so
+
+    .. math:: \hat R_d(k) = \frac{\alpha'}{2}\left(e^{-z_r\beta} + e^{-z_v\beta}\right),
+
+    and ``spectrum(medium, 0) == total_reflectance(medium)``.
+
+    Parameters
+    ----------
+    medium : Medium
+        Of shape ``C``.
+    k : array_like, rad/mm
+        Spatial frequencies, shape ``S``.
+
+    Returns
+    -------
+    Array of shape ``S + C``, dimensionless.
+    """
+    k = append_axes(as_float_array(k), len(medium.shape))
+    z_r, z_v = source_depths(medium)
+    beta = safe_sqrt(k**2 + 3.0 * medium.sigma_a * medium.sigma_t_prime)
+    return 0.5 * medium.reduced_albedo * (jnp.exp(-beta * z_r) + jnp.exp(-beta * z_v))
 
 
 def _total_from_root(s, A):
