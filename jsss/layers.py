@@ -37,7 +37,7 @@ from .medium import Medium
 from .multipole import slab_spectra, unscattered_transmittance
 from .numerics import as_float_array, is_concrete
 
-__all__ = ["Layer", "StackResult", "skin_three_layer", "stack", "stack_spectra"]
+__all__ = ["Layer", "StackResult", "combine_spectra", "skin_three_layer", "stack", "stack_spectra"]
 
 
 class Layer(eqx.Module):
@@ -77,8 +77,12 @@ class StackResult(eqx.Module):
     T_below: jax.Array | None
 
 
-def _combine(top, bottom):
-    """KM combination of (R+, T+, R-, T-) spectra of two slabs, top over bottom."""
+def combine_spectra(top, bottom):
+    """Kubelka-Munk combination of two ``(R+, T+, R-, T-)`` spectra, ``top`` over ``bottom``.
+
+    Arrays broadcast together (any frequencies and channels); returns the same four for
+    the pair (module docstring).
+    """
     R1p, T1p, R1m, T1m = top
     R2p, T2p, R2m, T2m = bottom
     # The denominator is 1 - (product of two reflectances < 1) > 0; near 0 only for two
@@ -148,10 +152,10 @@ def stack_spectra(layers: Sequence[Layer], base: Medium | None = None, k=0.0, *,
     for j, layer in enumerate(layers):
         eta_next = layers[j + 1].medium.eta if j + 1 < n else below
         spectra = _layer_spectra(layer, k, indices[j], eta_next)
-        result = spectra if result is None else _combine(result, spectra)
+        result = spectra if result is None else combine_spectra(result, spectra)
     if base is not None:
         base_spectra = _base_spectrum(base, k, indices[-1])
-        result = base_spectra if result is None else _combine(result, base_spectra)
+        result = base_spectra if result is None else combine_spectra(result, base_spectra)
     return result
 
 
