@@ -1,1 +1,10 @@
 """fitting: iterative fits of jsss models to data (Gaussian sums, medium parameters)."""
+
+from .gaussians import (
+    GaussianFit as GaussianFit,
+    fit_gaussians as fit_gaussians,
+    fit_gaussians_to_medium as fit_gaussians_to_medium,
+    radial_grid as radial_grid,
+)
+
+__all__ = ["GaussianFit", "fit_gaussians", "fit_gaussians_to_medium", "radial_grid"]

@@ -5,7 +5,18 @@ Public modules: :mod:`jsss.dipole`, :mod:`jsss.single_scattering`, :mod:`jsss.br
 :mod:`jsss.multipole`, :mod:`jsss.hankel`, :mod:`jsss.layers`. Lengths in mm, coefficients in 1/mm.
 """
 
-from . import brdf, dipole, fresnel, hankel, layers, materials, multipole, numerics, single_scattering
+from . import (
+    brdf,
+    dipole,
+    fresnel,
+    gaussians,
+    hankel,
+    layers,
+    materials,
+    multipole,
+    numerics,
+    single_scattering,
+)
 from .medium import Medium as Medium
 from .medium import reduced_albedo as reduced_albedo
 
@@ -14,6 +25,7 @@ __all__ = [
     "brdf",
     "dipole",
     "fresnel",
+    "gaussians",
     "hankel",
     "layers",
     "materials",
