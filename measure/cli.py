@@ -1,0 +1,324 @@
+"""``fit-params``: measured beam-profile images in, sigma_a / sigma_s' out.
+
+    fit-params MEASUREMENT.exr --reference REF.exr --pixel-mm 0.05 --eta 1.3 [--dark DARK.exr]
+               [--reference-reflectance 0.99] [--json] [--plot fit.png]
+    fit-params --demo [--json] [--plot fit.png]
+    fit-params batch DIR_OR_GLOB --out table.csv [--eta 1.3] [--pixel-mm 0.05] [--manifest M.csv]
+
+Bad input gives a one-line error and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import glob
+import json
+import os
+import re
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["main"]
+
+PROG = "fit-params"
+
+
+class UsageError(ValueError):
+    """A problem with the command line or the input files, reported in one line."""
+
+
+def _enable_x64():
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+
+
+# ----------------------------------------------------------------------------- single measurement
+def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference_reflectance=0.99, model="dipole",
+                  grid=None):
+    from .exr import read_exr
+    from .pipeline import fit_measurement
+
+    meas = read_exr(measurement)
+    ref = read_exr(reference, meas.channels)
+    dark_img = read_exr(dark, meas.channels) if dark else None
+    for img in [ref] + ([dark_img] if dark_img else []):
+        if img.pixels.shape != meas.pixels.shape:
+            raise UsageError(f"{img.path}: shape {img.pixels.shape} differs from {meas.path} {meas.pixels.shape}")
+    _check_saturation(meas)
+    _check_saturation(ref)
+    if pixel_mm is None:
+        pixel_mm = meas.header.get("jsss_pixel_mm")
+        if pixel_mm is None:
+            raise UsageError(f"{meas.path}: no pixel size in the header (jsss_pixel_mm); pass --pixel-mm")
+    if eta is None or eta <= 0:
+        raise UsageError(f"--eta must be > 0 (the relative index of refraction, e.g. 1.3); got {eta}")
+    if pixel_mm <= 0:
+        raise UsageError(f"--pixel-mm must be > 0; got {pixel_mm}")
+    return fit_measurement(meas.pixels, ref.pixels, float(pixel_mm), float(eta),
+                           dark=None if dark_img is None else dark_img.pixels,
+                           reference_reflectance=reference_reflectance, model=model, channels=meas.channels,
+                           grid=grid)
+
+
+def _check_saturation(image):
+    """Clipped highlights show as several pixels sharing the exact maximum of a channel."""
+    for c, name in enumerate(image.channels):
+        channel = image.pixels[..., c]
+        peak = channel.max()
+        if peak > 0 and np.count_nonzero(channel == peak) > 4:
+            raise UsageError(f"{image.path}: channel {name} looks saturated ({np.count_nonzero(channel == peak)} "
+                             f"pixels at the maximum {peak:g}); use a shorter exposure or merge brackets")
+
+
+def _format_table(table) -> str:
+    lines = [f"{'channel':<8} {'sigma_a [1/mm]':>22} {'sigma_s_prime [1/mm]':>22} {'total R_d':>10} "
+             f"{'mfp [mm]':>9} {'rel. resid.':>11}"]
+    for i, ch in enumerate(table["channels"]):
+        sa = f"{table['sigma_a'][i]:.5g} +- {table['sigma_a_err'][i]:.2g}"
+        ss = f"{table['sigma_s_prime'][i]:.5g} +- {table['sigma_s_prime_err'][i]:.2g}"
+        lines.append(f"{ch:<8} {sa:>22} {ss:>22} {table['total_reflectance'][i]:>10.4f} "
+                     f"{table['mean_free_path_mm'][i]:>9.4f} {table['rel_residual'][i]:>11.2e}")
+    return "\n".join(lines)
+
+
+def _plot(result, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jsss import dipole
+
+    prof = result.profile
+    fig, ax = plt.subplots(figsize=(6, 4))
+    r = np.geomspace(max(prof.r_mm[0], 1e-3), prof.r_mm[-1], 200)
+    model = np.asarray(dipole.profile(result.fit.medium, r)).reshape(r.size, -1)
+    colours = {"R": "tab:red", "G": "tab:green", "B": "tab:blue"}
+    for c, name in enumerate(result.channels):
+        colour = colours.get(name, "k")
+        ax.errorbar(prof.r_mm, prof.mean[:, c], yerr=prof.stderr[:, c], fmt=".", ms=3, color=colour,
+                    label=f"{name} measured")
+        ax.plot(r, model[:, c], "-", color=colour, lw=1, label=f"{name} dipole fit")
+    ax.set(xscale="log", yscale="log", xlabel="r [mm]", ylabel="R_d(r) [1/mm^2]", title="fit-params")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _single(args) -> int:
+    if not args.reference:
+        raise UsageError("--reference REF.exr is required (or use --demo)")
+    result = _load_and_fit(args.measurement, args.reference, pixel_mm=args.pixel_mm, eta=args.eta, dark=args.dark,
+                           reference_reflectance=args.reference_reflectance, model=args.model)
+    _report(result, args)
+    return 0
+
+
+def _report(result, args, truth=None):
+    table = result.table()
+    if args.plot:
+        _plot(result, args.plot)
+    if args.json:
+        if truth is not None:
+            table = {**table, "truth": truth}
+        print(json.dumps(table, indent=2))
+        return
+    print(_format_table(table))
+    if truth is not None:
+        print("\ntruth beside estimate:")
+        print(f"{'channel':<8} {'sigma_a true':>13} {'estimate':>10} {'rel.err':>8} "
+              f"{'sigma_s_prime true':>19} {'estimate':>10} {'rel.err':>8}")
+        for i, ch in enumerate(table["channels"]):
+            ta, ts = truth["sigma_a"][i], truth["sigma_s_prime"][i]
+            ea, es = table["sigma_a"][i], table["sigma_s_prime"][i]
+            print(f"{ch:<8} {ta:>13.5g} {ea:>10.5g} {ea / ta - 1:>8.2%} {ts:>19.5g} {es:>10.5g} {es / ts - 1:>8.2%}")
+    if args.plot:
+        print(f"\nplot written to {args.plot}")
+
+
+def _demo(args) -> int:
+    from jsss.materials import jensen2001
+
+    from .synth import synthesize, write_measurement
+
+    marble = jensen2001("marble")
+    with tempfile.TemporaryDirectory(prefix="jsss-demo-") as tmp:
+        synthetic = synthesize(marble, pixel_mm=0.05, size=256, beam_sigma_mm=0.05, photons_per_unit=1e5, seed=1)
+        paths = write_measurement(tmp, synthetic, name="marble")
+        if not args.json:
+            print(f"demo: synthetic marble measurement (256 x 256 px, 0.05 mm pixels, Gaussian beam 0.05 mm, "
+                  f"shot and read noise) written to {tmp}")
+        result = _load_and_fit(paths["measurement"], paths["reference"], pixel_mm=None, eta=1.5,
+                               dark=paths.get("dark"), model=args.model)
+    _report(result, args, truth=synthetic.truth)
+    return 0
+
+
+# ----------------------------------------------------------------------------- batch
+_ROLE = re.compile(r"_(ref|dark)$|_ref_t\d+$|_t\d+$")
+
+
+def _find_jobs(target, manifest):
+    """(measurement, reference, dark, overrides) tuples from a manifest or the naming rule."""
+    if manifest:
+        manifest = Path(manifest)
+        if not manifest.is_file():
+            raise UsageError(f"{manifest}: no such manifest")
+        jobs = []
+        with manifest.open(newline="") as handle:
+            reader = csv.DictReader(handle)
+            if not reader.fieldnames or not {"measurement", "reference"} <= set(reader.fieldnames):
+                raise UsageError(f"{manifest}: needs columns measurement,reference[,dark,pixel_mm,eta,reference_reflectance]")
+            for row in reader:
+                base = manifest.parent
+                overrides = {k: float(row[k]) for k in ("pixel_mm", "eta", "reference_reflectance") if row.get(k)}
+                jobs.append((base / row["measurement"], base / row["reference"],
+                             (base / row["dark"]) if row.get("dark") else None, overrides))
+        return jobs
+    path = Path(target)
+    candidates = sorted(path.glob("*.exr")) if path.is_dir() else sorted(Path(p) for p in glob.glob(str(target)))
+    candidates = [p for p in candidates if not _ROLE.search(p.stem)]
+    if not candidates:
+        raise UsageError(f"{target}: no measurement EXRs found (NAME.exr with NAME_ref.exr beside it)")
+    jobs = []
+    for m in candidates:
+        dark = m.with_name(f"{m.stem}_dark.exr")
+        jobs.append((m, m.with_name(f"{m.stem}_ref.exr"), dark if dark.exists() else None, {}))
+    return jobs
+
+
+def _progress(done, total, label, stream=sys.stderr):
+    width = 30
+    filled = int(width * done / max(total, 1))
+    stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label[:40]:<40}")
+    if done == total:
+        stream.write("\n")
+    stream.flush()
+
+
+def _rows(jobs, args):
+    from jsss import hankel
+
+    grid = hankel.hankel_grid()
+    rows = []
+    for i, (measurement, reference, dark, overrides) in enumerate(jobs):
+        _progress(i, len(jobs), measurement.name)
+        row = {"file": str(measurement), "status": "ok", "error": ""}
+        try:
+            result = _load_and_fit(measurement, reference, pixel_mm=overrides.get("pixel_mm", args.pixel_mm),
+                                   eta=overrides.get("eta", args.eta), dark=dark,
+                                   reference_reflectance=overrides.get("reference_reflectance", args.reference_reflectance),
+                                   model=args.model, grid=grid)
+            table = result.table()
+            for key in ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance",
+                        "mean_free_path_mm", "rel_residual", "converged"):
+                for ch, value in zip(table["channels"], table[key]):
+                    row[f"{key}_{ch}"] = value
+        except Exception as error:  # recorded in the table, never dropped
+            row.update(status="failed", error=f"{type(error).__name__}: {error}")
+        rows.append(row)
+    _progress(len(jobs), len(jobs), "done")
+    return rows
+
+
+def _write_table(rows, out):
+    """Write CSV (or Parquet) to a temp file beside ``out``, then rename: no partial tables."""
+    out = Path(out)
+    columns = ["file", "status", "error"] + sorted({k for r in rows for k in r} - {"file", "status", "error"})
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
+    os.close(fd)
+    try:
+        if out.suffix == ".parquet":
+            try:
+                import pyarrow as pa
+                import pyarrow.parquet as pq
+            except ImportError:
+                raise UsageError(f"{out}: writing .parquet needs pyarrow; install it or use .csv") from None
+            pq.write_table(pa.Table.from_pylist([{c: r.get(c) for c in columns} for r in rows]), tmp)
+        else:
+            with open(tmp, "w", newline="") as handle:
+                writer = csv.DictWriter(handle, fieldnames=columns)
+                writer.writeheader()
+                writer.writerows(rows)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _batch(argv) -> int:
+    parser = argparse.ArgumentParser(prog=f"{PROG} batch", description=(
+        "Fit many measurements. Naming rule: NAME.exr is a measurement, NAME_ref.exr its reference, NAME_dark.exr "
+        "its optional dark frame; or list them in a manifest CSV (columns measurement, reference, and optionally dark, "
+        "pixel_mm, eta, reference_reflectance; paths relative to the manifest). A file that fails becomes a row with "
+        "status 'failed' and its error."))
+    parser.add_argument("target", nargs="?", help="directory or glob of measurement EXRs")
+    parser.add_argument("--out", required=True, help="output table (.csv, or .parquet with pyarrow)")
+    parser.add_argument("--manifest", help="CSV listing the measurements instead of the naming rule")
+    parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
+    parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
+    parser.add_argument("--reference-reflectance", type=float, default=0.99)
+    parser.add_argument("--model", default="dipole", choices=["dipole"])
+    args = parser.parse_args(argv)
+    if not args.target and not args.manifest:
+        raise UsageError("batch needs a directory/glob or --manifest")
+    jobs = _find_jobs(args.target, args.manifest)
+    _enable_x64()
+    rows = _rows(jobs, args)
+    _write_table(rows, args.out)
+    failed = [r for r in rows if r["status"] != "ok"]
+    print(f"{len(rows) - len(failed)} fitted, {len(failed)} failed; table written to {args.out}")
+    for r in failed:
+        print(f"  failed: {r['file']}: {r['error']}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+# ----------------------------------------------------------------------------- entry point
+def _parser():
+    parser = argparse.ArgumentParser(prog=PROG, description=(
+        "Recover sigma_a and sigma_s' per channel from a beam-profile HDR image and a white reference "
+        "(Jensen et al. 2001). Also: 'fit-params batch ...' for many files."))
+    parser.add_argument("measurement", nargs="?", help="measurement EXR (linear HDR)")
+    parser.add_argument("--reference", help="white-reference EXR, same beam and camera")
+    parser.add_argument("--dark", help="dark-frame EXR subtracted from both")
+    parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
+    parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
+    parser.add_argument("--reference-reflectance", type=float, default=0.99,
+                        help="total reflectance of the reference (default 0.99, Spectralon)")
+    parser.add_argument("--model", default="dipole", choices=["dipole"], help="forward model")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    parser.add_argument("--plot", help="write a PNG of the profile and the fit")
+    parser.add_argument("--demo", action="store_true", help="fit a synthetic marble measurement")
+    return parser
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        if argv and argv[0] == "batch":
+            return _batch(argv[1:])
+        args = _parser().parse_args(argv)
+        _enable_x64()
+        if args.demo:
+            return _demo(args)
+        if not args.measurement:
+            raise UsageError("give a MEASUREMENT.exr (with --reference), or --demo, or 'batch'")
+        return _single(args)
+    except (UsageError, ValueError, OSError) as error:
+        message = str(error).splitlines()[0] if str(error) else type(error).__name__
+        print(f"{PROG}: error: {message}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

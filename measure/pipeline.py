@@ -1,0 +1,106 @@
+"""The measurement pipeline: images -> calibrated radial profile -> fitted medium.
+
+Pure array code (no file access): :mod:`measure.cli` reads the files and calls
+:func:`fit_measurement`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fitting.medium import MediumFit, fit_medium
+
+from .profile import Calibrated, RadialProfile, beam_center, beam_sigma, calibrate, check_image, radial_profile
+
+__all__ = ["MeasurementFit", "fit_measurement"]
+
+
+@dataclass(frozen=True)
+class MeasurementFit:
+    """The fit and what it was fitted to."""
+
+    fit: MediumFit
+    profile: RadialProfile
+    calibrated: Calibrated
+    center: tuple[float, float]
+    beam_sigma_mm: float
+    channels: tuple[str, ...]
+
+    def table(self) -> dict:
+        """Per-channel results as plain lists (the JSON and CSV schema)."""
+        f = self.fit
+        as_list = lambda x: np.asarray(x, dtype=float).reshape(-1).tolist()  # noqa: E731
+        return {
+            "channels": list(self.channels),
+            "sigma_a": as_list(f.medium.sigma_a),
+            "sigma_s_prime": as_list(f.medium.sigma_s_prime),
+            "sigma_a_err": as_list(f.sigma_a_err),
+            "sigma_s_prime_err": as_list(f.sigma_s_prime_err),
+            "eta": as_list(np.broadcast_to(np.asarray(f.medium.eta), np.shape(f.medium.sigma_a))),
+            "total_reflectance": as_list(f.total_reflectance),
+            "total_reflectance_in_image": as_list(self.calibrated.total_reflectance),
+            "mean_free_path_mm": as_list(1.0 / (np.asarray(f.medium.sigma_a) + np.asarray(f.medium.sigma_s_prime))),
+            "rel_residual": as_list(f.rel_residual),
+            "converged": [bool(x) for x in np.asarray(f.converged).reshape(-1)],
+        }
+
+
+def _sum_variance(image, center, pixel_mm):
+    """Variance of the sum of an image, from the per-pixel scatter in thin annuli.
+
+    Shot noise grows with the signal, so a border estimate of the read noise alone would
+    understate the error of the total; the annular scatter (about a straight line in r)
+    measures both, wherever the light is.
+    """
+    profile = radial_profile(image, center, pixel_mm, n_bins=96, r_min_mm=pixel_mm / 2,
+                             r_max_mm=np.hypot(*image.shape[:2]) * pixel_mm)
+    per_pixel = profile.stderr**2 * profile.count[:, None]
+    return np.sum(per_pixel * profile.count[:, None], axis=0)
+
+
+def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, reference_reflectance: float = 0.99,
+                    model: str = "dipole", channels=("R", "G", "B"), n_bins: int = 48,
+                    r_min_mm: float | None = None, grid=None) -> MeasurementFit:
+    """Calibrate, bin and fit one measurement (images ``(H, W, C)``).
+
+    The beam centre and width come from the reference. The fit models the beam, and bins
+    start at ``r_min_mm`` (default: the larger of 2 pixels and 2 beam widths), where the
+    image is dominated by the sample rather than by the beam's core. ``grid`` is the
+    Hankel grid of the model (build one with :func:`jsss.hankel.hankel_grid` and pass it
+    when fitting many measurements).
+    """
+    calibrated = calibrate(measurement, reference, pixel_mm, reference_reflectance=reference_reflectance, dark=dark)
+    offset = 0 if dark is None else np.asarray(dark, dtype=float)
+    meas = check_image(measurement, name="measurement") - offset
+    ref = check_image(reference, name="reference") - offset
+    center = beam_center(ref)
+    sigma = beam_sigma(ref, center, pixel_mm)
+    relative_var = (_sum_variance(meas, center, pixel_mm) / meas.sum(axis=(0, 1)) ** 2
+                    + _sum_variance(ref, center, pixel_mm) / ref.sum(axis=(0, 1)) ** 2)
+    total_stderr = np.abs(calibrated.total_reflectance) * np.sqrt(relative_var)
+    r_min = r_min_mm or max(2 * pixel_mm, 2 * sigma)
+    profile = radial_profile(calibrated.reflectance, center, pixel_mm, n_bins=n_bins, r_min_mm=r_min)
+    # Only bins outside r_min enter the fit: the first (inner disc) bin is dropped.
+    outer = profile.r_mm >= r_min
+    keep_pixels = outer[profile.bin_index]
+    remap = np.cumsum(outer) - 1
+    rows, cols = np.indices(calibrated.reflectance.shape[:2])
+    field = np.hypot(rows - center[0], cols - center[1]).ravel() * pixel_mm
+    # Pad to shapes fixed by the image size and n_bins, so that every measurement of a
+    # batch reuses one compiled fit: padded bins have zero error (ignored), padded pixels
+    # go to an extra bin that is dropped.
+    n_fit = int(outer.sum())
+    mean = np.zeros((n_bins, profile.mean.shape[1]))
+    err = np.zeros_like(mean)
+    mean[:n_fit], err[:n_fit] = profile.mean[outer], profile.stderr[outer]
+    radii = np.zeros(field.size)
+    index = np.full(field.size, n_bins)
+    used = int(keep_pixels.sum())
+    radii[:used] = profile.pixel_r_mm[keep_pixels]
+    index[:used] = remap[profile.bin_index[keep_pixels]]
+    fit = fit_medium(mean, err, eta, pixel_radii=radii, bin_index=index,
+                     total_reflectance=calibrated.total_reflectance, total_stderr=total_stderr,
+                     field_radii=field, pixel_area=pixel_mm**2, beam_sigma=sigma, model=model, grid=grid)
+    return MeasurementFit(fit, profile, calibrated, center, sigma, tuple(channels))

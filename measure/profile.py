@@ -1,0 +1,232 @@
+r"""From calibrated beam-profile images to radial profiles (Jensen et al. 2001 sec. 3).
+
+The image contract (README): a measurement pixel is :math:`p_i = K\Phi R_d(r_i)`; the
+reference (a white diffuse reflector of total reflectance :math:`\rho_{ref}`, same beam and
+camera) sums to :math:`K\Phi\rho_{ref}/A` with :math:`A` the area of one pixel, so
+
+.. math:: R_d(r_i) = \frac{\rho_{ref}\,p_i}{A \sum_j q_j}, \qquad
+          R_d^{total} = \rho_{ref}\frac{\sum_i p_i}{\sum_j q_j},
+
+after subtracting the dark frame from both. The beam's centre and width come from the
+reference image, which is the beam itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "Calibrated",
+    "RadialProfile",
+    "beam_center",
+    "beam_sigma",
+    "calibrate",
+    "check_image",
+    "merge_brackets",
+    "radial_profile",
+]
+
+
+def check_image(image, *, name: str = "image") -> np.ndarray:
+    """``image`` as float64 ``(H, W, C)``; raises naming ``name`` if not 2-D/3-D or not finite."""
+    image = np.asarray(image, dtype=np.float64)
+    if image.ndim == 2:
+        image = image[..., None]
+    if image.ndim != 3:
+        raise ValueError(f"`{name}` must have shape (H, W[, C]); got {image.shape}.")
+    bad = int(image.size - np.count_nonzero(np.isfinite(image)))
+    if bad:
+        raise ValueError(f"`{name}` has {bad} non-finite pixel values; mask them first.")
+    return image
+
+
+@dataclass(frozen=True)
+class Calibrated:
+    """Reflectance image [1/mm^2] ``(H, W, C)`` and the total diffuse reflectance ``(C,)``."""
+
+    reflectance: np.ndarray
+    total_reflectance: np.ndarray
+    total_stderr: np.ndarray
+
+
+def calibrate(measurement, reference, pixel_mm: float, *, reference_reflectance: float = 0.99,
+              dark=None, read_noise=None) -> Calibrated:
+    """Calibrate a measurement by the white reference (module docstring).
+
+    ``read_noise`` (per pixel, image units) sets the total's standard error; by default it
+    is estimated from the outer border of the measurement, where little light arrives.
+    """
+    meas = check_image(measurement, name="measurement")
+    ref = check_image(reference, name="reference")
+    if meas.shape != ref.shape:
+        raise ValueError(f"`measurement` {meas.shape} and `reference` {ref.shape} differ in shape.")
+    if dark is not None:
+        dark = check_image(dark, name="dark")
+        if dark.shape != meas.shape:
+            raise ValueError(f"`dark` {dark.shape} does not match `measurement` {meas.shape}.")
+        meas, ref = meas - dark, ref - dark
+    if not (0 < reference_reflectance <= 1):
+        raise ValueError(f"reference_reflectance must be in (0, 1]; got {reference_reflectance!r}.")
+    if pixel_mm <= 0:
+        raise ValueError(f"pixel_mm must be > 0; got {pixel_mm!r}.")
+    ref_sum = ref.sum(axis=(0, 1))
+    if np.any(ref_sum <= 0):
+        raise ValueError("`reference` holds no light after dark subtraction (its sum is <= 0 in some channel).")
+    area = pixel_mm**2
+    reflectance = reference_reflectance * meas / (area * ref_sum)
+    total = reference_reflectance * meas.sum(axis=(0, 1)) / ref_sum
+    if read_noise is None:
+        border = np.concatenate([meas[:4].reshape(-1, meas.shape[-1]), meas[-4:].reshape(-1, meas.shape[-1])])
+        read_noise = border.std(axis=0)
+    noise_sum = np.sqrt(meas.shape[0] * meas.shape[1]) * np.asarray(read_noise)
+    total_err = np.maximum(reference_reflectance * noise_sum / ref_sum, 1e-4 * np.abs(total))
+    return Calibrated(reflectance, total, total_err)
+
+
+def beam_center(image, *, iterations: int = 5) -> tuple[float, float]:
+    """Sub-pixel (row, col) of the beam: the intensity-weighted centroid within a window.
+
+    Starts at the brightest pixel; each iteration takes the centroid of the (non-negative)
+    channel sum within five half-maximum radii of the current estimate. For a sampled
+    symmetric beam the windowed centroid is unbiased, unlike a thresholded one.
+    """
+    image = check_image(image).sum(axis=-1)
+    peak = image.max()
+    if peak <= 0:
+        raise ValueError("beam_center: the image holds no light.")
+    rows, cols = np.indices(image.shape)
+    half_radius = np.sqrt(max(np.count_nonzero(image > 0.5 * peak), 1) / np.pi)
+    window = max(5 * half_radius, 3.0)
+    center = np.unravel_index(np.argmax(image), image.shape)
+    weights_all = np.clip(image, 0, None)
+    for _ in range(iterations):
+        inside = (rows - center[0]) ** 2 + (cols - center[1]) ** 2 <= window**2
+        weights = weights_all * inside
+        total = weights.sum()
+        center = (float((rows * weights).sum() / total), float((cols * weights).sum() / total))
+    return center
+
+
+def beam_sigma(reference, center, pixel_mm: float, *, radius_mm: float | None = None) -> float:
+    r"""Standard deviation [mm] of the beam from the reference's second moment, :math:`\langle r^2\rangle = 2\sigma^2`.
+
+    Only pixels within ``radius_mm`` (default: 10x the rough width, at least 5 pixels)
+    count, so noise far away does not inflate the moment.
+    """
+    image = check_image(reference, name="reference").sum(axis=-1)
+    rows, cols = np.indices(image.shape)
+    r2 = ((rows - center[0]) ** 2 + (cols - center[1]) ** 2) * pixel_mm**2
+    if radius_mm is None:
+        half = image > 0.5 * image.max()
+        rough = np.sqrt(max(half.sum(), 1) / np.pi) * pixel_mm  # radius at half maximum
+        radius_mm = max(10 * rough, 5 * pixel_mm)
+    inside = r2 <= radius_mm**2
+    weights = np.clip(image, 0, None) * inside
+    return float(np.sqrt((weights * r2).sum() / (2 * weights.sum())))
+
+
+@dataclass(frozen=True)
+class RadialProfile:
+    """Annular means of an image around a centre.
+
+    ``r_mm`` (B,) is the mean pixel radius in each bin, ``mean``/``stderr`` (B, C) the mean
+    value and its standard error (the scatter about a straight line in r within the bin,
+    over sqrt(n): the profile's own slope across an annulus is not noise), ``count`` (B,)
+    the pixels per bin;
+    ``pixel_r_mm`` and ``bin_index`` list every pixel used, for models that average
+    over the same pixels.
+    """
+
+    r_mm: np.ndarray
+    mean: np.ndarray
+    stderr: np.ndarray
+    count: np.ndarray
+    pixel_r_mm: np.ndarray
+    bin_index: np.ndarray
+
+
+def radial_profile(image, center, pixel_mm: float, *, n_bins: int = 64, r_min_mm: float | None = None,
+                   r_max_mm: float | None = None, min_count: int = 4) -> RadialProfile:
+    """Bin pixels into log-spaced annuli around ``center`` (row, col).
+
+    Bins run from ``r_min_mm`` (default one pixel) to ``r_max_mm`` (default the largest
+    circle inside the image); pixels inside ``r_min_mm`` form the first bin. Bins with
+    fewer than ``min_count`` pixels are merged away (dropped).
+    """
+    image = check_image(image)
+    h, w, _ = image.shape
+    rows, cols = np.indices((h, w))
+    r = np.hypot(rows - center[0], cols - center[1]) * pixel_mm
+    r_max_mm = r_max_mm or min(center[0], center[1], h - 1 - center[0], w - 1 - center[1]) * pixel_mm
+    r_min_mm = r_min_mm or pixel_mm
+    if not (0 < r_min_mm < r_max_mm):
+        raise ValueError(f"radial_profile needs 0 < r_min_mm < r_max_mm; got {r_min_mm}, {r_max_mm}.")
+    edges = np.concatenate([[0.0], np.geomspace(r_min_mm, r_max_mm, n_bins)])
+    inside = r <= r_max_mm
+    index = np.clip(np.searchsorted(edges, r[inside], side="right") - 1, 0, n_bins - 1)
+    values = image[inside]
+    counts = np.bincount(index, minlength=n_bins)
+    keep = counts >= min_count
+    remap = np.cumsum(keep) - 1
+    used = keep[index]
+    index, values, radii = remap[index[used]], values[used], r[inside][used]
+    counts = counts[keep]
+    def per_bin(weights):
+        return np.bincount(index, weights, minlength=counts.size)
+
+    r_mean = per_bin(radii) / counts
+    dr = radii - r_mean[index]
+    sxx = per_bin(dr**2)
+    mean = np.stack([per_bin(values[:, c]) for c in range(values.shape[1])], -1) / counts[:, None]
+    # The spread inside an annulus is mostly the profile's own slope across it, not noise:
+    # remove a straight line in r per bin and take the scatter about it.
+    slope = np.stack([per_bin(dr * values[:, c]) for c in range(values.shape[1])], -1) / np.maximum(sxx, 1e-300)[:, None]
+    resid = values - mean[index] - slope[index] * dr[:, None]
+    sq = np.stack([per_bin(resid[:, c] ** 2) for c in range(values.shape[1])], -1)
+    std = np.sqrt(sq / np.maximum(counts[:, None] - 2, 1))
+    return RadialProfile(r_mean, mean, std / np.sqrt(counts[:, None]), counts, radii, index)
+
+
+def merge_brackets(frames, exposure_times, *, saturation: float, dark=None, black_level: float = 0.0,
+                   names=None) -> np.ndarray:
+    """Merge exposure brackets of a linear camera into one HDR image (Debevec & Malik style).
+
+    Each frame's value is ``(frame - dark) / t``; frames are averaged with a hat weight of
+    the raw value (0 at ``black_level`` and ``saturation``, 1 in the middle) times the
+    exposure time (longer exposures collect more light, so less relative shot noise).
+    Saturated pixels (>= 0.99 ``saturation``) get weight 0.
+
+    Raises
+    ------
+    ValueError
+        No frames, mismatched shapes or times, or pixels saturated in every frame (the
+        message names the shortest frame).
+    """
+    frames = [check_image(f, name=(names[i] if names else f"frame {i}")) for i, f in enumerate(frames)]
+    times = np.asarray(exposure_times, dtype=float)
+    if not frames:
+        raise ValueError("merge_brackets needs at least one frame.")
+    if times.shape != (len(frames),) or np.any(times <= 0):
+        raise ValueError(f"merge_brackets needs one positive exposure time per frame; got {exposure_times!r}.")
+    if any(f.shape != frames[0].shape for f in frames):
+        raise ValueError(f"merge_brackets: frames differ in shape {[f.shape for f in frames]}.")
+    dark = np.zeros_like(frames[0]) if dark is None else check_image(dark, name="dark")
+    numerator = np.zeros_like(frames[0])
+    denominator = np.zeros_like(frames[0])
+    span = saturation - black_level
+    for frame, t in zip(frames, times):
+        z = (frame - black_level) / span
+        hat = np.clip(1 - np.abs(2 * z - 1), 0, None)
+        hat = np.where(frame >= black_level + 0.99 * span, 0.0, np.maximum(hat, 1e-3))
+        weight = hat * t
+        numerator += weight * (frame - dark) / t
+        denominator += weight
+    saturated = denominator == 0
+    if np.any(saturated):
+        shortest = int(np.argmin(times))
+        label = names[shortest] if names else f"frame {shortest} (t={times[shortest]})"
+        raise ValueError(f"{int(saturated.sum())} pixel values are saturated in every bracket, even {label}; "
+                         "add a shorter exposure.")
+    return numerator / denominator

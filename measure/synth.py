@@ -1,0 +1,157 @@
+r"""Synthetic beam-profile measurements with a known answer.
+
+The sample's exitance is the dipole profile convolved with a Gaussian beam of standard
+deviation ``beam_sigma_mm`` (computed exactly in frequency space: the dipole's closed-form
+spectrum times :math:`e^{-k^2\sigma^2/2}`, one inverse Hankel transform), sampled at pixel
+centres. The reference is the beam on a white diffuser of reflectance
+``reference_reflectance``. The camera is linear: an image value :math:`v` exposed for ``t``
+collects :math:`v\,t\,n_{ph}` photo-electrons (Poisson), plus Gaussian read noise and a dark
+offset, clipped at ``saturation``. ``exposures`` gives brackets; without them one
+(already HDR) frame of ``t = 1`` is returned.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from jsss import dipole, hankel
+from jsss.medium import Medium
+
+from .exr import write_exr
+
+__all__ = ["SyntheticMeasurement", "synthesize", "write_measurement"]
+
+
+@dataclass
+class SyntheticMeasurement:
+    """Images ``(H, W, C)`` and the truth. ``frames`` holds ``(image, exposure)`` brackets."""
+
+    measurement: np.ndarray
+    reference: np.ndarray
+    dark: np.ndarray | None
+    frames: list = field(default_factory=list)
+    reference_frames: list = field(default_factory=list)
+    truth: dict = field(default_factory=dict)
+
+
+def _exitance(medium: Medium, radii_mm: np.ndarray, beam_sigma_mm: float, grid=None) -> np.ndarray:
+    """Dipole convolved with the Gaussian beam at the given radii, shape radii.shape + C."""
+    grid = hankel.hankel_grid() if grid is None else grid
+    spectrum = dipole.spectrum(medium, grid.k) * np.exp(-np.asarray(grid.k)[:, None] ** 2 * beam_sigma_mm**2 / 2)
+    on_grid = np.asarray(hankel.inverse(grid, spectrum)).reshape(grid.r.shape[0], -1)
+    log_r = np.log(np.maximum(radii_mm.ravel(), float(grid.r[0])))
+    cols = [np.interp(log_r, np.log(np.asarray(grid.r)), on_grid[:, c]) for c in range(on_grid.shape[1])]
+    return np.stack(cols, -1).reshape(radii_mm.shape + (on_grid.shape[1],))
+
+
+def _beam(radii_mm, beam_sigma_mm, channels):
+    g = np.exp(-(radii_mm**2) / (2 * beam_sigma_mm**2)) / (2 * np.pi * beam_sigma_mm**2)
+    return np.repeat(g[..., None], channels, axis=-1)
+
+
+def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_sigma_mm: float = 0.05,
+               power: float = 1.0, gain: float = 1.0, photons_per_unit: float = 1e7, read_noise: float = 2.0,
+               dark_level: float = 0.0, exposures=None, saturation: float | None = None,
+               reference_reflectance: float = 0.99, center_offset=(0.3, -0.2), noise: bool = True,
+               seed: int = 0, grid=None) -> SyntheticMeasurement:
+    """Simulate a measurement of ``medium`` (RGB or one channel) and its white reference.
+
+    Parameters
+    ----------
+    medium : Medium
+    pixel_mm : float, keyword-only
+        Pixel pitch on the sample [mm].
+    size : int, keyword-only
+        Image is ``size x size``.
+    beam_sigma_mm : float, keyword-only
+        Gaussian beam standard deviation [mm].
+    power, gain : float, keyword-only
+        Incident power and camera gain; an image value is ``gain * power * R``.
+    photons_per_unit : float, keyword-only
+        Photo-electrons per unit image value per unit exposure (sets the shot noise).
+    read_noise : float, keyword-only
+        Gaussian read noise [electrons].
+    dark_level : float, keyword-only
+        Offset in image units added to every frame; a matching dark frame is returned.
+    exposures : sequence of float, optional, keyword-only
+        Exposure times of brackets (each clipped at ``saturation``); ``measurement`` is then
+        left as the frame of the longest exposure and the caller merges.
+    saturation : float, optional, keyword-only
+        Clip level of a frame in image units (default: none).
+    center_offset : (float, float), keyword-only
+        Sub-pixel offset (rows, cols) of the beam from the image centre.
+    noise : bool, keyword-only
+        False gives the exact expected images.
+    seed : int, keyword-only
+    grid : HankelGrid, optional, keyword-only
+        Transform grid for the beam convolution (default :func:`jsss.hankel.hankel_grid`).
+    """
+    rng = np.random.default_rng(seed)
+    centre = ((size - 1) / 2 + center_offset[0], (size - 1) / 2 + center_offset[1])
+    rows, cols = np.indices((size, size))
+    radii = np.hypot(rows - centre[0], cols - centre[1]) * pixel_mm
+    scale = gain * power
+    sample = scale * _exitance(medium, radii, beam_sigma_mm, grid)
+    channels = sample.shape[-1]
+    reference = scale * reference_reflectance * _beam(radii, beam_sigma_mm, channels)
+
+    def expose(value, t):
+        if not noise:
+            frame = value * t
+        else:
+            electrons = rng.poisson(np.clip(value * t * photons_per_unit, 0, None)).astype(float)
+            electrons += rng.normal(0.0, read_noise, value.shape)
+            frame = electrons / photons_per_unit
+        frame = frame + dark_level
+        return frame if saturation is None else np.minimum(frame, saturation)
+
+    def dark_frame():
+        if not noise:
+            return np.full_like(sample, dark_level)
+        return dark_level + rng.normal(0.0, read_noise, sample.shape) / photons_per_unit
+
+    truth = dict(sigma_a=np.asarray(medium.sigma_a).tolist(), sigma_s_prime=np.asarray(medium.sigma_s_prime).tolist(),
+                 eta=np.asarray(medium.eta).tolist(), total_reflectance=np.asarray(dipole.total_reflectance(medium)).tolist(),
+                 pixel_mm=pixel_mm, size=size, beam_sigma_mm=beam_sigma_mm, center=list(centre),
+                 reference_reflectance=reference_reflectance, photons_per_unit=photons_per_unit, read_noise=read_noise,
+                 dark_level=dark_level, exposures=None if exposures is None else list(exposures), saturation=saturation,
+                 seed=seed, noise=noise)
+    dark = dark_frame() if (dark_level or noise) else None
+    if exposures is None:
+        return SyntheticMeasurement(expose(sample, 1.0), expose(reference, 1.0), dark, truth=truth)
+    frames = [(expose(sample, t), float(t)) for t in exposures]
+    reference_frames = [(expose(reference, t), float(t)) for t in exposures]
+    longest = int(np.argmax(exposures))
+    return SyntheticMeasurement(frames[longest][0], reference_frames[longest][0], dark, frames, reference_frames, truth)
+
+
+def write_measurement(directory, synthetic: SyntheticMeasurement, *, name: str = "sample",
+                      pixel_type: str = "float") -> dict:
+    """Write ``NAME.exr``, ``NAME_ref.exr`` (and ``NAME_dark.exr``) plus ``NAME.json`` with the truth.
+
+    Brackets are written as ``NAME_t{i}.exr`` / ``NAME_ref_t{i}.exr`` with their exposure
+    in the header (``jsss_exposure``). Returns the paths written, by role.
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    channels = ("R", "G", "B") if synthetic.measurement.shape[-1] == 3 else ("Y",)
+    attrs = {"jsss_pixel_mm": float(synthetic.truth["pixel_mm"])}
+    paths = {
+        "measurement": write_exr(directory / f"{name}.exr", synthetic.measurement, channels, pixel_type=pixel_type, attributes=attrs),
+        "reference": write_exr(directory / f"{name}_ref.exr", synthetic.reference, channels, pixel_type=pixel_type, attributes=attrs),
+    }
+    if synthetic.dark is not None:
+        paths["dark"] = write_exr(directory / f"{name}_dark.exr", synthetic.dark, channels, pixel_type=pixel_type, attributes=attrs)
+    for i, ((frame, t), (ref, _)) in enumerate(zip(synthetic.frames, synthetic.reference_frames)):
+        paths[f"frame_{i}"] = write_exr(directory / f"{name}_t{i}.exr", frame, channels, pixel_type=pixel_type,
+                                        attributes={**attrs, "jsss_exposure": t})
+        paths[f"reference_frame_{i}"] = write_exr(directory / f"{name}_ref_t{i}.exr", ref, channels,
+                                                  pixel_type=pixel_type, attributes={**attrs, "jsss_exposure": t})
+    sidecar = directory / f"{name}.json"
+    sidecar.write_text(json.dumps({"truth": synthetic.truth, "files": {k: v.name for k, v in paths.items()}}, indent=2))
+    paths["sidecar"] = sidecar
+    return paths

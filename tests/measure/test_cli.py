@@ -1,0 +1,119 @@
+"""The fit-params command line, run as a subprocess: demo, single fits, batch, bad input."""
+
+import csv
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from jsss import hankel
+from jsss.materials import jensen2001
+from measure.exr import write_exr
+from measure.synth import synthesize, write_measurement
+
+
+def run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "measure.cli", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, timeout=600, stdin=subprocess.DEVNULL)
+
+
+@pytest.fixture(scope="module")
+def measurements(tmp_path_factory):
+    """Two noisy synthetic measurements written with the naming rule, plus a broken one."""
+    directory = tmp_path_factory.mktemp("batch")
+    grid = hankel.hankel_grid()
+    for i, name in enumerate(["skin1", "apple"]):
+        write_measurement(directory, synthesize(jensen2001(name), size=128, photons_per_unit=1e5, seed=i, grid=grid),
+                          name=name)
+    write_exr(directory / "orphan.exr", np.ones((8, 8, 3)))  # no orphan_ref.exr beside it
+    return directory
+
+
+def test_demo_prints_truth_beside_estimate_as_json():
+    """--demo --json gives the documented keys and estimates within 5 % of the truth."""
+    out = run("--demo", "--json")
+    assert out.returncode == 0, out.stderr
+    table = json.loads(out.stdout)
+    for key in ("channels", "sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err"):
+        assert len(table[key]) == 3
+    np.testing.assert_allclose(table["sigma_a"], table["truth"]["sigma_a"], rtol=0.05)
+    np.testing.assert_allclose(table["sigma_s_prime"], table["truth"]["sigma_s_prime"], rtol=0.05)
+
+
+def test_single_measurement_table_and_plot(measurements, tmp_path):
+    """A measurement with its reference and dark frame prints a table and writes the plot."""
+    d = measurements
+    plot = tmp_path / "fit.png"
+    out = run(d / "skin1.exr", "--reference", d / "skin1_ref.exr", "--dark", d / "skin1_dark.exr", "--eta", 1.3,
+              "--plot", plot)
+    assert out.returncode == 0, out.stderr
+    assert "sigma_s_prime" in out.stdout and out.stdout.count("\n") >= 4
+    assert plot.stat().st_size > 1000
+
+
+def test_batch_writes_every_row_atomically_and_reports_failures(measurements, tmp_path):
+    """Two fits and one failure (missing reference) give three rows; exit status 1; no temp files."""
+    out_csv = tmp_path / "table.csv"
+    out = run("batch", measurements, "--out", out_csv, "--eta", 1.3)
+    assert out.returncode == 1, out.stderr
+    rows = list(csv.DictReader(out_csv.open()))
+    assert len(rows) == 3
+    status = {r["file"].split("/")[-1]: r for r in rows}
+    assert status["orphan.exr"]["status"] == "failed" and "orphan_ref.exr: no such file" in status["orphan.exr"]["error"]
+    for name, medium in (("skin1.exr", jensen2001("skin1")), ("apple.exr", jensen2001("apple"))):
+        assert status[name]["status"] == "ok"
+        estimate = [float(status[name][f"sigma_a_{c}"]) for c in "RGB"]
+        np.testing.assert_allclose(estimate, np.asarray(medium.sigma_a), rtol=0.05)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv"]
+    assert "3/3" in out.stderr  # the progress bar ran to the end
+
+
+def test_manifest_lists_measurements(measurements, tmp_path):
+    manifest = measurements / "manifest.csv"
+    manifest.write_text("measurement,reference,dark,eta\nskin1.exr,skin1_ref.exr,skin1_dark.exr,1.3\n")
+    out = run("batch", "--manifest", manifest, "--out", tmp_path / "m.csv")
+    assert out.returncode == 0, out.stderr
+    assert len(list(csv.DictReader((tmp_path / "m.csv").open()))) == 1
+
+
+@pytest.mark.parametrize(
+    "case, expected",
+    [
+        ("missing", "nope.exr: no such file"),
+        ("garbage", "not a readable OpenEXR"),
+        ("nan", "NaN/Inf"),
+        ("saturated", "looks saturated"),
+        ("eta", "--eta must be > 0"),
+        ("no_reference", "--reference REF.exr is required"),
+        ("shape", "differs from"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path):
+    """Each bad input gives exit status 2 and a one-line error naming the problem, no traceback."""
+    d = measurements
+    ref = d / "skin1_ref.exr"
+    if case == "missing":
+        args = [tmp_path / "nope.exr", "--reference", ref]
+    elif case == "garbage":
+        (tmp_path / "g.exr").write_text("garbage")
+        args = [tmp_path / "g.exr", "--reference", ref]
+    elif case == "nan":
+        image = np.ones((128, 128, 3))
+        image[3, 4, 0] = np.inf
+        args = [write_exr(tmp_path / "nan.exr", image), "--reference", ref, "--pixel-mm", 0.05]
+    elif case == "saturated":
+        image = np.full((128, 128, 3), 0.1)
+        image[60:66, 60:66] = 5.0
+        args = [write_exr(tmp_path / "sat.exr", image), "--reference", ref, "--pixel-mm", 0.05]
+    elif case == "eta":
+        args = [d / "skin1.exr", "--reference", ref, "--eta", -1]
+    elif case == "no_reference":
+        args = [d / "skin1.exr"]
+    else:
+        args = [write_exr(tmp_path / "small.exr", np.ones((8, 8, 3))), "--reference", ref, "--pixel-mm", 0.05]
+    out = run(*args)
+    assert out.returncode == 2
+    assert expected in out.stderr
+    assert "Traceback" not in out.stderr and out.stderr.strip().count("\n") == 0
