@@ -24,6 +24,7 @@ import optimistix as optx
 from jsss import dipole
 from jsss.gaussian_sum import GaussianSum
 from jsss.medium import Medium
+from jsss.numerics import warn_if_low_precision
 
 __all__ = ["GaussianFit", "fit_gaussians", "fit_gaussians_to_medium", "radial_grid"]
 
@@ -108,8 +109,8 @@ def _fit_one(profile, total, starts, r, sqrt_q, solver, max_steps):
 def _starts(key, n_starts, n, r, profile_total_guess):
     """Log-uniform random variances between (2 r_min)^2 and (r_max / 2)^2 (sorted), equal weights."""
     lo, hi = jnp.log((2 * r[0]) ** 2), jnp.log((r[-1] / 2) ** 2)
-    b = jnp.sort(jax.random.uniform(key, (n_starts, n), minval=lo, maxval=hi), axis=1)
-    a = jnp.full((n_starts, n), jnp.log(profile_total_guess / n))
+    b = jnp.sort(jax.random.uniform(key, (n_starts, n), dtype=r.dtype, minval=lo, maxval=hi), axis=1)
+    a = jnp.full((n_starts, n), jnp.log(profile_total_guess / n), dtype=r.dtype)
     return a, b
 
 
@@ -168,8 +169,11 @@ def fit_gaussians(r, profile, n: int = 4, *, weight: Literal["r"] = "r", total=N
         raise ValueError(f"fit_gaussians(weight={weight!r}): the only supported weight is 'r'.")
     if n < 1 or n_starts < 1:
         raise ValueError(f"fit_gaussians needs n >= 1 and n_starts >= 1; got n={n}, n_starts={n_starts}.")
-    r = jnp.asarray(r)
-    profile = jnp.asarray(profile)
+    # Fits run in the widest float JAX offers (float64 under jax_enable_x64): the objective
+    # spans many decades and LM's damping mixes in default-precision scalars.
+    dtype = jnp.promote_types(jnp.asarray(profile).dtype, jnp.result_type(float))
+    profile = jnp.asarray(profile, dtype=dtype)
+    r = jnp.asarray(r, dtype=dtype)
     if profile.ndim < 1 or r.shape[:1] != profile.shape[:1] or (r.ndim > 1 and r.shape != profile.shape):
         raise ValueError("fit_gaussians needs r of shape (N,) or like the profile, and profile of shape "
                          f"(N, ...); got {r.shape} and {profile.shape}.")
@@ -179,6 +183,7 @@ def fit_gaussians(r, profile, n: int = 4, *, weight: Literal["r"] = "r", total=N
             raise ValueError("fit_gaussians(r=...) must be positive and strictly increasing along axis 0.")
     if not isinstance(profile, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(profile))):
         raise ValueError("fit_gaussians(profile=...) has non-finite values; mask them first.")
+    warn_if_low_precision(profile, what="fit_gaussians", needs="the published 4-Gaussian errors (enable jax_enable_x64)")
     batch = profile.shape[1:]
     flat = jnp.moveaxis(profile.reshape(r.shape[0], -1), 0, 1)
     radii = jnp.moveaxis(jnp.broadcast_to(r.reshape(r.shape + (1,) * (profile.ndim - r.ndim)), profile.shape)

@@ -101,3 +101,29 @@ def test_bad_input_raises_with_the_parameter_named(kwargs, message):
     r, profile = args.pop("r"), args.pop("profile")
     with pytest.raises(ValueError, match=message):
         fit_gaussians(r, profile, **args)
+
+
+def test_without_x64_fits_warn_that_float64_is_needed():
+    """With jax_enable_x64 off the fit can only run in float32: LowPrecisionWarning says so.
+
+    Run in a subprocess, since the flag is global and the suite runs in float64.
+    """
+    import subprocess
+    import sys
+
+    code = (
+        "import warnings, jax.numpy as jnp\n"
+        "from fitting import fit_gaussians\n"
+        "from jsss.numerics import LowPrecisionWarning\n"
+        "r = jnp.geomspace(1e-3, 10.0, 64)\n"
+        "with warnings.catch_warnings(record=True) as caught:\n"
+        "    warnings.simplefilter('always')\n"
+        "    fit = fit_gaussians(r, jnp.exp(-r**2 / 2) / (2 * jnp.pi), 1, n_starts=2)\n"
+        "assert any(issubclass(w.category, LowPrecisionWarning) for w in caught)\n"
+        "assert fit.weights.dtype == jnp.float32\n"
+        "print('warned', float(fit.weights[0]))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         env={**__import__("os").environ, "JAX_ENABLE_X64": "0"})
+    assert out.returncode == 0, out.stderr
+    assert "warned" in out.stdout
