@@ -13,8 +13,10 @@ from . import (
     hankel,
     layers,
     materials,
+    montecarlo,
     multipole,
     numerics,
+    sampling,
     single_scattering,
 )
 from .medium import Medium as Medium
@@ -29,8 +31,10 @@ __all__ = [
     "hankel",
     "layers",
     "materials",
+    "montecarlo",
     "multipole",
     "numerics",
     "reduced_albedo",
+    "sampling",
     "single_scattering",
 ]
