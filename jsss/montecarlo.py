@@ -56,11 +56,12 @@ def _scatter(direction, cos_theta, phi):
 
 
 def _walk(key, params, max_steps):
-    """One photon: returns (exit radius, exit weight, side: 0 inside/lost or absorbed, 1 top, 2 bottom)."""
+    """One photon: (exit radius, exit weight, side): side 0 still inside (lost), 1 top, 2 bottom
+    after scattering, 3 absorbed (roulette), 4 bottom without any collision."""
     sigma_t, albedo, g, thickness, rel_top, rel_bottom = params
 
     def body(state):
-        pos, direction, weight, side, exit_r, key, steps = state
+        pos, direction, weight, side, exit_r, key, steps, collided = state
         active = side == 0
         key, sub = jax.random.split(key)
         u_path, u_fresnel, u_theta, u_phi, u_roulette = jax.random.uniform(sub, (5,), dtype=pos.dtype)
@@ -92,16 +93,18 @@ def _walk(key, params, max_steps):
         new_exit_r = jnp.where(leaves, jnp.hypot(new_pos[0], new_pos[1]), exit_r)
         keep = lambda new, old: jnp.where(active, new, old)  # noqa: E731
         return (keep(new_pos, pos), keep(new_direction, direction), keep(new_weight, weight),
-                keep(new_side, side), keep(new_exit_r, exit_r), key, steps + 1)
+                keep(new_side, side), keep(new_exit_r, exit_r), key, steps + 1, collided | (active & ~hits))
 
     def walking(state):
         return (state[3] == 0) & (state[6] < max_steps)
 
     dtype = sigma_t.dtype
     state = (jnp.zeros(3, dtype), jnp.array([0.0, 0.0, 1.0], dtype), jnp.ones((), dtype), jnp.zeros((), jnp.int32),
-             jnp.zeros((), dtype), key, jnp.zeros((), jnp.int32))
-    _, _, weight, side, exit_r, _, _ = jax.lax.while_loop(walking, body, state)
-    return exit_r, jnp.where((side == 1) | (side == 2), weight, 0.0), side
+             jnp.zeros((), dtype), key, jnp.zeros((), jnp.int32), jnp.zeros((), bool))
+    _, _, weight, side, exit_r, _, _, collided = jax.lax.while_loop(walking, body, state)
+    # Side 4: crossed the slab without any collision (the unscattered beam).
+    side = jnp.where((side == 2) & ~collided, 4, side)
+    return exit_r, jnp.where((side == 1) | (side == 2) | (side == 4), weight, 0.0), side
 
 
 @dataclass(frozen=True)
@@ -109,14 +112,17 @@ class MonteCarloResult:
     """Totals with standard errors, the radial reflectance profile, and bookkeeping.
 
     ``R_profile``/``T_profile`` [1/mm^2] are per unit entering flux on the annuli between
-    ``bin_edges`` (their mean radii ``r``); the profile errors are standard errors.
-    ``lost`` is the fraction of photons still walking after ``max_steps``.
+    ``bin_edges`` (their mean radii ``r``); the profile errors are standard errors. ``T``
+    is diffuse (scattered at least once); ``T_unscattered`` is the beam that crossed without
+    a collision (a delta at r = 0, not in ``T_profile``). ``lost`` is the fraction of photons
+    still walking after ``max_steps``.
     """
 
     R: float
     R_err: float
     T: float
     T_err: float
+    T_unscattered: float
     lost: float
     r: np.ndarray
     bin_edges: np.ndarray
@@ -216,5 +222,6 @@ def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=No
     R, R_err, R_prof, R_prof_err = tally(side == 1)
     T, T_err, T_prof, T_prof_err = tally(side == 2)
     centres = np.sqrt(0.5 * (bin_edges[:-1] ** 2 + np.minimum(bin_edges[1:], 1e150) ** 2))
-    return MonteCarloResult(float(R), float(R_err), float(T), float(T_err), float(np.mean(side == 0)),
+    T_direct = float(np.mean(np.where(side == 4, w, 0.0)))
+    return MonteCarloResult(float(R), float(R_err), float(T), float(T_err), T_direct, float(np.mean(side == 0)),
                             centres, bin_edges, R_prof, R_prof_err, T_prof, T_prof_err, n, seconds)

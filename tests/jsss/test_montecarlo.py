@@ -27,7 +27,10 @@ def test_slab_totals_agree_with_adding_doubling(albedo, g, n, b):
     # The walk starts inside (per unit entering flux): scale by the entry transmittance.
     # Both sides count the unscattered beam and its internal reflections.
     assert (1 - rs) * result.R == pytest.approx(UR1 - rs, abs=3 * result.R_err + 0.002)
-    assert (1 - rs) * result.T == pytest.approx(UT1, abs=3 * result.T_err + 0.002)
+    assert (1 - rs) * (result.T + result.T_unscattered) == pytest.approx(UT1, abs=3 * result.T_err + 0.002)
+    # The unscattered beam: e^{-b} (1 - rs) per entering photon, with its internal echoes.
+    echoes = (1 - rs) * np.exp(-b) / (1 - rs**2 * np.exp(-2 * b))
+    assert result.T_unscattered == pytest.approx(echoes, abs=4 * np.sqrt(echoes / 32768))
     assert result.lost == 0.0
 
 
