@@ -139,7 +139,7 @@ class MonteCarloResult:
 
 
 def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=None, eta_bottom=None,
-                n_photons: int = 100_000, batch_size: int = 16_384, max_steps: int = 2000, bin_edges=None,
+                n_photons: int = 100_000, batch_size: int = 4096, max_steps: int = 2000, bin_edges=None,
                 seed: int = 0, progress: bool | None = None) -> MonteCarloResult:
     """Run the random walk for a single-channel medium.
 
