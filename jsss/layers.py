@@ -159,7 +159,7 @@ def stack_spectra(layers: Sequence[Layer], base: Medium | None = None, k=0.0, *,
     return result
 
 
-def stack(layers: Sequence[Layer], base: Medium | None = None, *, grid: hankel.HankelGrid | None = None,
+def stack(layers: Sequence[Layer], base: Medium | None = None, *, r=None, grid: hankel.HankelGrid | None = None,
           eta_above=1.0, eta_below=1.0) -> StackResult:
     r"""Profiles and totals of slabs stacked over an optional semi-infinite base.
 
@@ -169,6 +169,10 @@ def stack(layers: Sequence[Layer], base: Medium | None = None, *, grid: hankel.H
         Top first.
     base : Medium, optional
         Semi-infinite medium under the layers.
+    r : array_like, shape ``(N,)`` [mm], optional, keyword-only
+        Radii at which to return the profiles (interpolated linearly in log r from the
+        transform grid; values below ``grid.r[0]`` take the first node's). Default: the
+        grid's radii.
     grid : HankelGrid, optional, keyword-only
         Radii and frequencies (default :func:`jsss.hankel.hankel_grid` with its defaults,
         which takes about a second to build: make one and pass it for repeated calls).
@@ -198,12 +202,24 @@ def stack(layers: Sequence[Layer], base: Medium | None = None, *, grid: hankel.H
             collimated = collimated * unscattered_transmittance(layer.medium, layer.thickness)
     R = hankel.inverse(grid, R_hat)
     T = hankel.inverse(grid, T_hat - collimated)
+    radii = grid.r
+    if r is not None:
+        radii = as_float_array(r)
+        R, T = (_interpolate_log(grid.r, values, radii) for values in (R, T))
     return StackResult(
-        r=grid.r, R=R, T=T, k=grid.k, R_hat=R_hat, T_hat=T_hat,
+        r=radii, R=R, T=T, k=grid.k, R_hat=R_hat, T_hat=T_hat,
         R_total=R0, T_total=T0 - collimated, T_unscattered=collimated,
         R_below=None if base is not None else R_up0,
         T_below=None if base is not None else T_up0 - collimated,
     )
+
+
+def _interpolate_log(grid_r, values, r):
+    """Linear interpolation in log r along axis 0 of ``values`` (N,) + C onto ``r`` (M,)."""
+    x = jnp.log(jnp.maximum(r, grid_r[0]))
+    flat = values.reshape(values.shape[0], -1)
+    columns = [jnp.interp(x, jnp.log(grid_r), flat[:, c]) for c in range(flat.shape[1])]
+    return jnp.stack(columns, -1).reshape(r.shape + values.shape[1:])
 
 
 def skin_three_layer(*, dtype=None):

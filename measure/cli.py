@@ -2,6 +2,7 @@
 
     fit-params MEASUREMENT.exr --reference REF.exr --pixel-mm 0.05 --eta 1.3 [--dark DARK.exr]
                [--reference-reflectance 0.99] [--json] [--plot fit.png]
+    fit-params T0.exr T1.exr T2.exr --saturation 0.2 --reference REF.exr ...   (exposure brackets)
     fit-params --demo [--json] [--plot fit.png]
     fit-params batch DIR_OR_GLOB --out table.csv [--eta 1.3] [--pixel-mm 0.05] [--manifest M.csv]
 
@@ -38,19 +39,46 @@ def _enable_x64():
 
 
 # ----------------------------------------------------------------------------- single measurement
+def _merge_frames(paths, saturation, dark):
+    """Read exposure brackets (exposure in each header's ``jsss_exposure``) and merge them."""
+    from .exr import ExrImage, read_exr
+    from .profile import merge_brackets
+
+    frames = [read_exr(p) for p in paths]
+    missing = [str(f.path) for f in frames if "jsss_exposure" not in f.header]
+    if missing:
+        raise UsageError(f"{missing[0]}: bracket without an exposure time (header attribute jsss_exposure)")
+    if saturation is None:
+        raise UsageError("several measurement frames need --saturation (the clip level of a frame)")
+    dark_pixels = None if dark is None else read_exr(dark, frames[0].channels).pixels
+    merged = merge_brackets([f.pixels for f in frames], [f.header["jsss_exposure"] for f in frames],
+                            saturation=saturation, dark=dark_pixels, names=[str(f.path) for f in frames])
+    return ExrImage(merged, frames[0].channels, frames[0].header, frames[0].path)
+
+
 def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference_reflectance=0.99, model="dipole",
-                  grid=None):
+                  grid=None, saturation=None):
     from .exr import read_exr
     from .pipeline import fit_measurement
 
-    meas = read_exr(measurement)
+    paths = measurement if isinstance(measurement, (list, tuple)) else [measurement]
+    if len(paths) > 1:
+        meas = _merge_frames(paths, saturation, dark)
+        dark_for_fit = None  # already subtracted from the merged frames
+    else:
+        meas = read_exr(paths[0])
+        dark_for_fit = dark
     ref = read_exr(reference, meas.channels)
     dark_img = read_exr(dark, meas.channels) if dark else None
     for img in [ref] + ([dark_img] if dark_img else []):
         if img.pixels.shape != meas.pixels.shape:
             raise UsageError(f"{img.path}: shape {img.pixels.shape} differs from {meas.path} {meas.pixels.shape}")
-    _check_saturation(meas)
+    if len(paths) == 1:
+        _check_saturation(meas)
     _check_saturation(ref)
+    if dark_img is not None and dark_for_fit is None:
+        ref = type(ref)(ref.pixels - dark_img.pixels, ref.channels, ref.header, ref.path)
+        dark_img = None
     if pixel_mm is None:
         pixel_mm = meas.header.get("jsss_pixel_mm")
         if pixel_mm is None:
@@ -115,7 +143,8 @@ def _single(args) -> int:
     if not args.reference:
         raise UsageError("--reference REF.exr is required (or use --demo)")
     result = _load_and_fit(args.measurement, args.reference, pixel_mm=args.pixel_mm, eta=args.eta, dark=args.dark,
-                           reference_reflectance=args.reference_reflectance, model=args.model)
+                           reference_reflectance=args.reference_reflectance, model=args.model,
+                           saturation=args.saturation)
     _report(result, args)
     return 0
 
@@ -285,13 +314,15 @@ def _parser():
     parser = argparse.ArgumentParser(prog=PROG, description=(
         "Recover sigma_a and sigma_s' per channel from a beam-profile HDR image and a white reference "
         "(Jensen et al. 2001). Also: 'fit-params batch ...' for many files."))
-    parser.add_argument("measurement", nargs="?", help="measurement EXR (linear HDR)")
+    parser.add_argument("measurement", nargs="*", help="measurement EXR (linear HDR), or several exposure brackets "
+                        "(each with its exposure in the header attribute jsss_exposure) to merge")
     parser.add_argument("--reference", help="white-reference EXR, same beam and camera")
     parser.add_argument("--dark", help="dark-frame EXR subtracted from both")
     parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
     parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
     parser.add_argument("--reference-reflectance", type=float, default=0.99,
                         help="total reflectance of the reference (default 0.99, Spectralon)")
+    parser.add_argument("--saturation", type=float, help="clip level of a bracket (needed with several frames)")
     parser.add_argument("--model", default="dipole", choices=["dipole"], help="forward model")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--plot", help="write a PNG of the profile and the fit")

@@ -78,10 +78,11 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
     dark_level : float, keyword-only
         Offset in image units added to every frame; a matching dark frame is returned.
     exposures : sequence of float, optional, keyword-only
-        Exposure times of brackets (each clipped at ``saturation``); ``measurement`` is then
-        left as the frame of the longest exposure and the caller merges.
+        Exposure times of brackets, returned in ``frames`` and ``reference_frames`` (each
+        clipped at ``saturation``) for the caller to merge; ``measurement`` and
+        ``reference`` stay single unclipped HDR frames of exposure 1.
     saturation : float, optional, keyword-only
-        Clip level of a frame in image units (default: none).
+        Clip level of a bracket in image units (default: none).
     center_offset : (float, float), keyword-only
         Sub-pixel offset (rows, cols) of the beam from the image centre.
     noise : bool, keyword-only
@@ -99,7 +100,7 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
     channels = sample.shape[-1]
     reference = scale * reference_reflectance * _beam(radii, beam_sigma_mm, channels)
 
-    def expose(value, t):
+    def expose(value, t, clip=True):
         if not noise:
             frame = value * t
         else:
@@ -107,7 +108,7 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
             electrons += rng.normal(0.0, read_noise, value.shape)
             frame = electrons / photons_per_unit
         frame = frame + dark_level
-        return frame if saturation is None else np.minimum(frame, saturation)
+        return frame if (saturation is None or not clip) else np.minimum(frame, saturation)
 
     def dark_frame():
         if not noise:
@@ -121,12 +122,12 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
                  dark_level=dark_level, exposures=None if exposures is None else list(exposures), saturation=saturation,
                  seed=seed, noise=noise)
     dark = dark_frame() if (dark_level or noise) else None
+    measurement, ref_image = expose(sample, 1.0, clip=False), expose(reference, 1.0, clip=False)
     if exposures is None:
-        return SyntheticMeasurement(expose(sample, 1.0), expose(reference, 1.0), dark, truth=truth)
+        return SyntheticMeasurement(measurement, ref_image, dark, truth=truth)
     frames = [(expose(sample, t), float(t)) for t in exposures]
     reference_frames = [(expose(reference, t), float(t)) for t in exposures]
-    longest = int(np.argmax(exposures))
-    return SyntheticMeasurement(frames[longest][0], reference_frames[longest][0], dark, frames, reference_frames, truth)
+    return SyntheticMeasurement(measurement, ref_image, dark, frames, reference_frames, truth)
 
 
 def write_measurement(directory, synthetic: SyntheticMeasurement, *, name: str = "sample",

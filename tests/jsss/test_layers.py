@@ -151,3 +151,12 @@ def test_bad_layers_are_rejected():
         stack_spectra([Medium(0.1, 1.0)], None, 0.0)
     with pytest.raises(ValueError, match="at least one"):
         stack_spectra([], None, 0.0)
+
+
+def test_profiles_at_requested_radii_interpolate_the_grid(grid):
+    """stack(..., r=...) returns the profile at those radii, equal to the dipole for a bare base."""
+    m = Medium(0.02, 1.0, 1.4)
+    r = jnp.array([0.05, 0.3, 1.0, 4.0])
+    result = stack([], m, r=r, grid=grid)
+    assert result.R.shape == (4,)
+    np.testing.assert_allclose(result.R, dipole.profile(m, r), rtol=1e-4)

@@ -117,3 +117,20 @@ def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path
     assert out.returncode == 2
     assert expected in out.stderr
     assert "Traceback" not in out.stderr and out.stderr.strip().count("\n") == 0
+
+
+def test_exposure_brackets_are_merged_before_the_fit(tmp_path):
+    """Three clipped brackets (exposure in each header) + --saturation fit like an HDR image."""
+    medium = jensen2001("marble")
+    synthetic = synthesize(medium, size=128, photons_per_unit=1e5, exposures=[1.0, 0.05, 0.0025], saturation=0.2,
+                           seed=5)
+    paths = write_measurement(tmp_path, synthetic, name="m")
+    frames = [paths[f"frame_{i}"] for i in range(3)]
+    out = run(*frames, "--reference", paths["reference"], "--dark", paths["dark"], "--saturation", 0.2,
+              "--eta", 1.5, "--json")
+    assert out.returncode == 0, out.stderr
+    table = json.loads(out.stdout)
+    np.testing.assert_allclose(table["sigma_a"], np.asarray(medium.sigma_a), rtol=0.05)
+    np.testing.assert_allclose(table["sigma_s_prime"], np.asarray(medium.sigma_s_prime), rtol=0.05)
+    missing = run(*frames, "--reference", paths["reference"], "--eta", 1.5)
+    assert missing.returncode == 2 and "--saturation" in missing.stderr
