@@ -1,7 +1,7 @@
 r"""Monte Carlo photon random walk: the ground truth the diffusion models are checked against.
 
 A normally incident pencil beam *enters* a slab (thickness ``d`` mm, ``inf`` for a
-semi-infinite medium) at the origin: results are per unit flux entering, as for the dipole
+semi-infinite medium), or a stack of layers (:func:`random_walk_layers`), at the origin: results are per unit flux entering, as for the dipole
 (multiply by the entry Fresnel transmittance for flux incident from outside). Each photon
 takes exponential free paths with :math:`\sigma_t = \sigma_a + \sigma_s`,
 :math:`\sigma_s = \sigma_s'/(1-g)`; at each collision its weight is multiplied by the albedo
@@ -9,7 +9,7 @@ takes exponential free paths with :math:`\sigma_t = \sigma_a + \sigma_s`,
 ``g``. At a boundary it is reflected with the exact Fresnel probability for its angle
 (relative index ``eta_top``/``eta_bottom``; total internal reflection included), otherwise it
 leaves and its weight is tallied as reflectance (top) or transmittance (bottom) at its exit
-radius. Below weight 1e-4, Russian roulette keeps one photon in ten at ten times the
+radius; between layers a transmitted photon refracts (Snell) into the next layer. Below weight 1e-4, Russian roulette keeps one photon in ten at ten times the
 weight (unbiased). A photon still inside after ``max_steps`` collisions is counted as lost.
 
 Photons run in parallel (``vmap`` of a ``lax.while_loop``: a batch runs until its last
@@ -29,7 +29,7 @@ import numpy as np
 from .fresnel import fresnel_reflectance
 from .medium import Medium
 
-__all__ = ["MonteCarloResult", "random_walk", "sample_henyey_greenstein"]
+__all__ = ["MonteCarloResult", "random_walk", "random_walk_layers", "sample_henyey_greenstein"]
 
 
 def sample_henyey_greenstein(g, xi):
@@ -56,53 +56,67 @@ def _scatter(direction, cos_theta, phi):
 
 
 def _walk(key, params, max_steps):
-    """One photon: (exit radius, exit weight, side): side 0 still inside (lost), 1 top, 2 bottom
-    after scattering, 3 absorbed (roulette), 4 bottom without any collision."""
-    sigma_t, albedo, g, thickness, rel_top, rel_bottom = params
+    """One photon through a stack of layers; returns (exit radius, exit weight, side).
+
+    Side 0: still inside after ``max_steps`` (lost); 1: left through the top; 2: left
+    through the bottom after scattering; 3: absorbed (roulette); 4: left through the
+    bottom without any collision (the unscattered beam).
+    """
+    sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below = params
+    n_layers = sigma_t.shape[0]
 
     def body(state):
-        pos, direction, weight, side, exit_r, key, steps, collided = state
+        pos, direction, weight, side, exit_r, key, steps, collided, layer = state
         active = side == 0
         key, sub = jax.random.split(key)
         u_path, u_fresnel, u_theta, u_phi, u_roulette = jax.random.uniform(sub, (5,), dtype=pos.dtype)
-        s = -jnp.log1p(-u_path) / sigma_t
+        s = -jnp.log1p(-u_path) / sigma_t[layer]
         dz = direction[2]
-        to_top = jnp.where(dz < 0, -pos[2] / jnp.where(dz < 0, dz, -1.0), jnp.inf)
-        to_bottom = jnp.where(dz > 0, (thickness - pos[2]) / jnp.where(dz > 0, dz, 1.0), jnp.inf)
+        to_top = jnp.where(dz < 0, (pos[2] - tops[layer]) / jnp.where(dz < 0, -dz, 1.0), jnp.inf)
+        to_bottom = jnp.where(dz > 0, (bottoms[layer] - pos[2]) / jnp.where(dz > 0, dz, 1.0), jnp.inf)
         to_boundary = jnp.minimum(to_top, to_bottom)
         hits = s >= to_boundary
+        up = to_top <= to_bottom
         step = jnp.where(hits, to_boundary, s)
         new_pos = pos + direction * step
-        # Boundary: Fresnel reflection from inside (relative index outside/inside).
-        top = to_top <= to_bottom
-        reflectance = fresnel_reflectance(jnp.abs(dz), jnp.where(top, rel_top, rel_bottom))
-        reflects = u_fresnel < reflectance
-        leaves = hits & ~reflects
+        new_pos = new_pos.at[2].set(jnp.where(hits, jnp.where(up, tops[layer], bottoms[layer]), new_pos[2]))
+        # Boundary: Fresnel reflection or transmission (with refraction into the next layer).
+        neighbour = jnp.where(up, layer - 1, layer + 1)
+        outside = (neighbour < 0) | (neighbour >= n_layers)
+        n1 = index[layer]
+        n2 = jnp.where(neighbour < 0, eta_above, jnp.where(neighbour >= n_layers, eta_below,
+                                                             index[jnp.clip(neighbour, 0, n_layers - 1)]))
+        reflects = u_fresnel < fresnel_reflectance(jnp.abs(dz), n2 / n1)
+        leaves = hits & ~reflects & outside
+        crosses = hits & ~reflects & ~outside
+        ratio = n1 / n2
+        cos_t = jnp.sqrt(jnp.maximum(1 - ratio**2 * (1 - dz**2), 0.0))
+        refracted = jnp.stack([direction[0] * ratio, direction[1] * ratio, jnp.sign(dz) * cos_t])
         mirrored = direction * jnp.array([1.0, 1.0, -1.0], dtype=pos.dtype)
         # Collision: absorb by weight, scatter by HG.
-        cos_theta = sample_henyey_greenstein(g, u_theta)
-        phi = 2 * jnp.pi * u_phi
-        scattered = _scatter(direction, cos_theta, phi)
-        collided_weight = weight * albedo
-        survive = u_roulette < 0.1
+        cos_theta = sample_henyey_greenstein(g[layer], u_theta)
+        scattered = _scatter(direction, cos_theta, 2 * jnp.pi * u_phi)
+        collided_weight = weight * albedo[layer]
         low = collided_weight < 1e-4
-        collided_weight = jnp.where(low, jnp.where(survive, collided_weight * 10, 0.0), collided_weight)
-        new_direction = jnp.where(hits, jnp.where(reflects, mirrored, direction), scattered)
+        collided_weight = jnp.where(low, jnp.where(u_roulette < 0.1, collided_weight * 10, 0.0), collided_weight)
+        new_direction = jnp.where(hits, jnp.where(reflects, mirrored, jnp.where(crosses, refracted, direction)),
+                                  scattered)
         new_weight = jnp.where(hits, weight, collided_weight)
-        new_side = jnp.where(leaves, jnp.where(top, 1, 2), jnp.where(new_weight == 0, 3, 0))
+        new_layer = jnp.where(crosses, neighbour, layer)
+        new_side = jnp.where(leaves, jnp.where(up, 1, 2), jnp.where(new_weight == 0, 3, 0))
         new_exit_r = jnp.where(leaves, jnp.hypot(new_pos[0], new_pos[1]), exit_r)
         keep = lambda new, old: jnp.where(active, new, old)  # noqa: E731
         return (keep(new_pos, pos), keep(new_direction, direction), keep(new_weight, weight),
-                keep(new_side, side), keep(new_exit_r, exit_r), key, steps + 1, collided | (active & ~hits))
+                keep(new_side, side), keep(new_exit_r, exit_r), key, steps + 1, collided | (active & ~hits),
+                keep(new_layer, layer))
 
     def walking(state):
         return (state[3] == 0) & (state[6] < max_steps)
 
     dtype = sigma_t.dtype
     state = (jnp.zeros(3, dtype), jnp.array([0.0, 0.0, 1.0], dtype), jnp.ones((), dtype), jnp.zeros((), jnp.int32),
-             jnp.zeros((), dtype), key, jnp.zeros((), jnp.int32), jnp.zeros((), bool))
-    _, _, weight, side, exit_r, _, _, collided = jax.lax.while_loop(walking, body, state)
-    # Side 4: crossed the slab without any collision (the unscattered beam).
+             jnp.zeros((), dtype), key, jnp.zeros((), jnp.int32), jnp.zeros((), bool), jnp.zeros((), jnp.int32))
+    _, _, weight, side, exit_r, _, _, collided, _ = jax.lax.while_loop(walking, body, state)
     side = jnp.where((side == 2) & ~collided, 4, side)
     return exit_r, jnp.where((side == 1) | (side == 2) | (side == 4), weight, 0.0), side
 
@@ -165,23 +179,54 @@ def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=No
     -------
     MonteCarloResult
     """
-    import time
-
     if medium.shape != ():
         raise ValueError(f"random_walk needs a single-channel medium; got shape {medium.shape}.")
+    # One layer whose index is 1 inside, seen through the given relative indices outside.
+    eta_top = medium.eta if eta_top is None else eta_top
+    eta_bottom = medium.eta if eta_bottom is None else eta_bottom
+    return _run([medium], [thickness], g=g, eta_above=1.0 / eta_top, eta_below=1.0 / eta_bottom, relative=True,
+                n_photons=n_photons, batch_size=batch_size, max_steps=max_steps, bin_edges=bin_edges, seed=seed,
+                progress=progress)
+
+
+def random_walk_layers(layers, base: Medium | None = None, *, g: float = 0.0, eta_above: float = 1.0,
+                       eta_below: float = 1.0, n_photons: int = 100_000, batch_size: int = 4096,
+                       max_steps: int = 2000, bin_edges=None, seed: int = 0,
+                       progress: bool | None = None) -> MonteCarloResult:
+    """Random walk through a stack of :class:`jsss.layers.Layer` (top first), over an optional
+    semi-infinite ``base``. Each ``medium.eta`` is the layer's absolute index; photons refract
+    (Snell) and reflect (Fresnel) at every interface. Other options as :func:`random_walk`.
+    """
+    media = [layer.medium for layer in layers] + ([base] if base is not None else [])
+    thicknesses = [float(layer.thickness) for layer in layers] + ([np.inf] if base is not None else [])
+    if not media:
+        raise ValueError("random_walk_layers needs at least one layer or a base.")
+    return _run(media, thicknesses, g=g, eta_above=eta_above, eta_below=eta_below, relative=False,
+                n_photons=n_photons, batch_size=batch_size, max_steps=max_steps, bin_edges=bin_edges, seed=seed,
+                progress=progress)
+
+
+def _run(media, thicknesses, *, g, eta_above, eta_below, relative, n_photons, batch_size, max_steps, bin_edges,
+         seed, progress):
+    import time
+
+    for m in media:
+        if m.shape != ():
+            raise ValueError(f"random_walk needs single-channel media; got shape {m.shape}.")
     if not (-1 < g < 1):
         raise ValueError(f"random_walk(g=...) must lie in (-1, 1); got {g!r}.")
-    if not (thickness > 0):
-        raise ValueError(f"random_walk(thickness=...) must be > 0 [mm]; got {thickness!r}.")
-    dtype = medium.dtype
-    sigma_s = medium.sigma_s_prime / (1 - g)
-    sigma_t = medium.sigma_a + sigma_s
+    if any(not (d > 0) for d in thicknesses):
+        raise ValueError(f"random_walk(thickness=...) must be > 0 [mm]; got {thicknesses!r}.")
+    dtype = jnp.result_type(*[m.dtype for m in media])
+    sigma_s = jnp.stack([m.sigma_s_prime / (1 - g) for m in media]).astype(dtype)
+    sigma_t = jnp.stack([m.sigma_a for m in media]).astype(dtype) + sigma_s
     albedo = sigma_s / sigma_t
-    eta_top = medium.eta if eta_top is None else jnp.asarray(eta_top, dtype)
-    eta_bottom = medium.eta if eta_bottom is None else jnp.asarray(eta_bottom, dtype)
-    params = (jnp.asarray(sigma_t, dtype), jnp.asarray(albedo, dtype), jnp.asarray(g, dtype),
-              jnp.asarray(thickness, dtype), 1.0 / eta_top, 1.0 / eta_bottom)
-    mfp = float(medium.mean_free_path)
+    bottoms = np.cumsum(thicknesses)
+    tops = np.concatenate([[0.0], bottoms[:-1]])
+    index = jnp.ones(len(media), dtype) if relative else jnp.stack([jnp.asarray(m.eta, dtype) for m in media])
+    params = (sigma_t, albedo, jnp.full(len(media), g, dtype), jnp.asarray(tops, dtype), jnp.asarray(bottoms, dtype),
+              index, jnp.asarray(eta_above, dtype), jnp.asarray(eta_below, dtype))
+    mfp = float(min(float(m.mean_free_path) for m in media))
     if bin_edges is None:
         bin_edges = np.concatenate([[0.0], np.geomspace(0.01 * mfp, 100 * mfp, 64), [np.inf]])
     bin_edges = np.asarray(bin_edges, dtype=float)

@@ -77,3 +77,28 @@ def test_bad_arguments_are_rejected():
         random_walk(Medium(jnp.ones(3) * 0.1, 1.0))
     with pytest.raises(ValueError, match="g"):
         random_walk(Medium(0.1, 1.0), g=1.0)
+
+
+def test_two_index_matched_halves_equal_one_slab():
+    """Unlike diffusion theory, transport through two identical layers of d/2 is one slab of d:
+    totals agree within 4 combined standard errors."""
+    from jsss.layers import Layer
+    from jsss.montecarlo import random_walk_layers
+
+    medium = Medium(0.05, 1.2, 1.4)
+    one = random_walk_layers([Layer(medium, 2.0)], n_photons=16384, seed=1)
+    two = random_walk_layers([Layer(medium, 1.0), Layer(medium, 1.0)], n_photons=16384, seed=2)
+    for a, b, ea, eb in ((one.R, two.R, one.R_err, two.R_err), (one.T, two.T, one.T_err, two.T_err)):
+        assert a == pytest.approx(b, abs=4 * np.hypot(ea, eb))
+
+
+def test_non_absorbing_stack_with_index_steps_conserves_energy():
+    """sigma_a = 0 in every layer, indices 1.3 / 1.5 / 1.33 over air: every photon is reflected,
+    transmitted (scattered or not) or still walking."""
+    from jsss.layers import Layer
+    from jsss.montecarlo import random_walk_layers
+
+    layers = [Layer(Medium(0.0, 2.0, 1.3), 0.5), Layer(Medium(0.0, 0.5, 1.5), 1.0), Layer(Medium(0.0, 1.0, 1.33), 0.7)]
+    result = random_walk_layers(layers, n_photons=8192, seed=4)
+    assert result.R + result.T + result.T_unscattered + result.lost == pytest.approx(1.0, abs=1e-12)
+    assert result.T_unscattered > 0 and result.lost < 1e-3
