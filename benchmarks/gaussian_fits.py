@@ -27,21 +27,11 @@ from scipy.optimize import least_squares  # noqa: E402
 sys.path.insert(0, os.path.dirname(__file__))
 from _timing import median_seconds  # noqa: E402
 
-from fitting import fit_gaussians, radial_grid  # noqa: E402
+from fitting import fit_gaussians, jensen2001_profiles  # noqa: E402
 from fitting.gaussians import _starts, _trapezoid_weights  # noqa: E402
 from jsss import dipole  # noqa: E402
 from jsss.gaussians import empirical_dipole_fit, relative_rms_error  # noqa: E402
 from jsss.materials import jensen2001, jensen2001_names  # noqa: E402
-
-
-def channels():
-    radii, profiles = [], []
-    for name in jensen2001_names():
-        medium = jensen2001(name)
-        r = radial_grid(medium)
-        radii.append(jnp.broadcast_to(r[:, None], (r.size, 3)))
-        profiles.append(dipole.profile(medium, r))
-    return jnp.concatenate(radii, 1), jnp.concatenate(profiles, 1)
 
 
 def scipy_fit(r, profile, n, n_starts, key):
@@ -71,7 +61,7 @@ def main():
     args = parser.parse_args()
     today = datetime.date.today().isoformat()
     platform = jax.devices()[0].platform
-    R, P = channels()
+    R, P, _ = jensen2001_profiles()
     R_np, P_np = np.asarray(R), np.asarray(P)
     keys = jax.random.split(jax.random.PRNGKey(0), P.shape[1])
 

@@ -30,7 +30,6 @@ sys.path.insert(0, os.path.dirname(__file__))
 from _timing import median_seconds  # noqa: E402
 
 from jsss import dipole, hankel  # noqa: E402
-from jsss.fresnel import internal_reflection_parameter  # noqa: E402
 from jsss.layers import combine_spectra, skin_three_layer, stack  # noqa: E402
 from jsss.medium import Medium  # noqa: E402
 from jsss.multipole import slab_profiles, unscattered_transmittance  # noqa: E402

@@ -4,7 +4,8 @@ from .gaussians import (
     GaussianFit as GaussianFit,
     fit_gaussians as fit_gaussians,
     fit_gaussians_to_medium as fit_gaussians_to_medium,
+    jensen2001_profiles as jensen2001_profiles,
     radial_grid as radial_grid,
 )
 
-__all__ = ["GaussianFit", "fit_gaussians", "fit_gaussians_to_medium", "radial_grid"]
+__all__ = ["GaussianFit", "fit_gaussians", "fit_gaussians_to_medium", "jensen2001_profiles", "radial_grid"]

@@ -26,7 +26,7 @@ from jsss.gaussian_sum import GaussianSum
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
 
-__all__ = ["GaussianFit", "fit_gaussians", "fit_gaussians_to_medium", "radial_grid"]
+__all__ = ["GaussianFit", "fit_gaussians", "fit_gaussians_to_medium", "jensen2001_profiles", "radial_grid"]
 
 
 class GaussianFit(eqx.Module):
@@ -221,3 +221,24 @@ def fit_gaussians_to_medium(medium: Medium, n: int = 4, *, conserve_total: bool 
     profile = dipole.profile(medium, r)
     total = dipole.total_reflectance(medium) if conserve_total else None
     return fit_gaussians(r, profile, n, total=total, **options)
+
+
+def jensen2001_profiles(n: int = 256):
+    """Dipole profiles of all 36 Jensen 2001 channels, each on its own :func:`radial_grid`.
+
+    Returns
+    -------
+    radii, profiles : Arrays ``(n, 36)`` [mm, 1/mm^2], ready for one batched :func:`fit_gaussians`
+    labels : list of str
+        ``"Material R"``, ``"Material G"``, ... in the same column order.
+    """
+    from jsss.materials import jensen2001, jensen2001_names
+
+    radii, profiles, labels = [], [], []
+    for name in jensen2001_names():
+        medium = jensen2001(name)
+        r = radial_grid(medium, n)
+        radii.append(jnp.broadcast_to(r[:, None], (n, 3)))
+        profiles.append(dipole.profile(medium, r))
+        labels += [f"{name} {c}" for c in "RGB"]
+    return jnp.concatenate(radii, 1), jnp.concatenate(profiles, 1), labels

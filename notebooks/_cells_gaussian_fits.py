@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt
 from jsss import dipole
 from jsss.gaussians import empirical_dipole_fit, evaluate, relative_rms_error
 from jsss.materials import jensen2001, jensen2001_names
-from fitting import fit_gaussians, radial_grid
+from fitting import fit_gaussians, jensen2001_profiles, radial_grid
 """),
     ("md", "## Marble, green channel: the profile, its fits and their residuals (scaled by 2 pi r, as light is applied radially)"),
     ("code", """
@@ -43,8 +43,7 @@ top.legend(fontsize=8); bottom.legend(fontsize=8);
     ("md", "## The error table: four Gaussians for each of the 36 channels (d'Eon reports 0.0793 % to 1.52 %)"),
     ("code", """
 names = jensen2001_names()
-radii = jnp.concatenate([jnp.broadcast_to(radial_grid(jensen2001(n))[:, None], (256, 3)) for n in names], 1)
-profiles = jnp.concatenate([dipole.profile(jensen2001(n), radial_grid(jensen2001(n))) for n in names], 1)
+radii, profiles, labels = jensen2001_profiles()
 fit = fit_gaussians(radii, profiles, 4)
 errors = 100 * np.asarray(fit.rel_rms).reshape(len(names), 3)
 print(f"{'material':<11} {'R %':>7} {'G %':>7} {'B %':>7}")

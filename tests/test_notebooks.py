@@ -1,6 +1,5 @@
 """Every tutorial in notebooks/ runs top to bottom on a fresh kernel without errors."""
 
-import os
 from pathlib import Path
 
 import pytest

@@ -5,9 +5,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fitting import fit_gaussians, fit_gaussians_to_medium, radial_grid
+from fitting import fit_gaussians, fit_gaussians_to_medium, jensen2001_profiles, radial_grid
 from jsss import Medium, dipole
-from jsss.gaussians import evaluate, relative_rms_error
+from jsss.gaussians import relative_rms_error
 from jsss.materials import jensen2001, jensen2001_names
 
 
@@ -25,13 +25,8 @@ def test_recovers_the_gaussians_that_made_the_data():
 @pytest.fixture(scope="module")
 def jensen_fits():
     """All 36 channels with the defaults a user gets, in one batched call."""
-    radii, profiles = [], []
-    for name in jensen2001_names():
-        medium = jensen2001(name)
-        r = radial_grid(medium)
-        radii.append(jnp.broadcast_to(r[:, None], (r.size, 3)))
-        profiles.append(dipole.profile(medium, r))
-    fit = fit_gaussians(jnp.concatenate(radii, 1), jnp.concatenate(profiles, 1), 4)
+    radii, profiles, _ = jensen2001_profiles()
+    fit = fit_gaussians(radii, profiles, 4)
     return {name: np.asarray(fit.rel_rms[3 * i: 3 * i + 3]) for i, name in enumerate(jensen2001_names())}
 
 

@@ -24,10 +24,9 @@ from jsss.gaussians import (
     relative_rms_error,
     second_moment,
     to_gaussian_sum,
-    to_poly,
     total,
 )
-from jsss.layers import Layer, combine_spectra, skin_three_layer, stack, stack_spectra
+from jsss.layers import Layer, combine_spectra, skin_three_layer, stack
 from jsss.materials import jensen2001, jensen2001_table
 from jsss.multipole import slab_totals
 from tests.helpers import radial_integral
