@@ -104,11 +104,11 @@ def _residuals(params, args):
 
 
 @partial(jax.jit, static_argnames=("max_steps",))
-def _fit_channels(measured, stderr, totals, total_errs, eta, k, beam_sigma, bins_from_spectrum, total_from_spectrum,
-                  starts, *, max_steps, rtol, atol):
+def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, k, beam_sigma, bins_from_spectrum,
+                  total_from_spectrum, starts, *, max_steps, rtol, atol):
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
-    def one(meas, err, total, total_err, eta_c, start_set):
+    def one(meas, err, total, total_err, scale_err, eta_c, start_set):
         usable = (meas > 0) & (err > 0)
         inv_rel_err = jnp.where(usable, meas / jnp.where(usable, err, 1.0), 0.0)
         inv_total_err = jnp.where(total_err > 0, 1.0 / jnp.where(total_err > 0, total_err, 1.0), 0.0)
@@ -127,7 +127,14 @@ def _fit_channels(measured, stderr, totals, total_errs, eta, k, beam_sigma, bins
         jac = jax.jacfwd(lambda p: _residuals((p[0], p[1]), args))(jnp.stack(params))
         m = jnp.sum(usable) + (inv_total_err > 0)
         chi2_red = losses[best] / jnp.maximum(m - 2, 1)
-        cov = jnp.linalg.pinv(jac.T @ jac) * chi2_red
+        normal_inverse = jnp.linalg.pinv(jac.T @ jac)
+        cov = normal_inverse * chi2_red
+        # A calibration scale common to every bin and the total (the reference's sum) is
+        # not in the per-bin errors: propagate it. Scaling the data by e^s shifts each log
+        # residual by -s * inv_rel_err and the total residual by -s * total * inv_total_err.
+        d_res_d_scale = -jnp.concatenate([inv_rel_err, (total * inv_total_err)[None]])
+        d_params_d_scale = -normal_inverse @ (jac.T @ d_res_d_scale)
+        cov = cov + jnp.outer(d_params_d_scale, d_params_d_scale) * scale_err**2
         binned, _ = _model(params, args[0])
         model_total = dipole.total_reflectance(Medium(jnp.exp(params[0]), jnp.exp(params[1]), eta_c))
         rel = jnp.where(usable, binned / jnp.where(usable, meas, 1.0) - 1, 0.0)
@@ -136,7 +143,7 @@ def _fit_channels(measured, stderr, totals, total_errs, eta, k, beam_sigma, bins
         return (sa, ss, sa * jnp.sqrt(cov[0, 0]), ss * jnp.sqrt(cov[1, 1]), model_total, rel_rms, chi2_red,
                 steps[best], ok[best])
 
-    return jax.vmap(one, in_axes=(1, 1, 0, 0, 0, 0))(measured, stderr, totals, total_errs, eta, starts)
+    return jax.vmap(one, in_axes=(1, 1, 0, 0, 0, 0, 0))(measured, stderr, totals, total_errs, scale_errs, eta, starts)
 
 
 def _starting_points(totals, eta, n_starts):
@@ -149,7 +156,7 @@ def _starting_points(totals, eta, n_starts):
 
 
 def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectance=None, total_stderr=None,
-               field_radii=None, pixel_area: float | None = None,
+               field_radii=None, pixel_area: float | None = None, scale_stderr=None,
                beam_sigma: float = 0.0, model: str = "dipole", n_starts: int = 7, max_steps: int = 200,
                rtol: float = 1e-10, atol: float = 1e-12, grid: hankel.HankelGrid | None = None) -> MediumFit:
     """Fit sigma_a and sigma_s' per channel to binned radial profiles.
@@ -174,6 +181,9 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
         summed, and ``pixel_area`` [mm^2] their area: the model's total is then summed over
         the same pixels. Without them the model's total is over the whole plane, which is
         biased when light leaves the image (translucent materials, small fields of view).
+    scale_stderr : array_like ``(C,)``, optional, keyword-only
+        Relative standard error of a calibration factor shared by every bin and the total
+        (the reference's sum); propagated into the parameters' errors.
     beam_sigma : float [mm], keyword-only
         Standard deviation of the Gaussian beam; 0 for a point beam.
     model : {"dipole"}, keyword-only
@@ -220,7 +230,9 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
         row = _interpolation_rows(grid_r, field, np.zeros(field.size, dtype=int), 1, float(pixel_area))
         total_from_spectrum = jnp.asarray((row @ inverse)[0], measured.dtype)
     log_sa, log_ss = _starting_points(totals, eta, n_starts)
-    out = _fit_channels(measured, errors, totals, total_errs, eta, jnp.asarray(grid.k, measured.dtype),
+    scale_errs = jnp.broadcast_to(jnp.asarray(0.0 if scale_stderr is None else scale_stderr, measured.dtype),
+                                  (n_channels,))
+    out = _fit_channels(measured, errors, totals, total_errs, scale_errs, eta, jnp.asarray(grid.k, measured.dtype),
                         jnp.asarray(beam_sigma, measured.dtype), bins_from_spectrum, total_from_spectrum,
                         (log_sa, log_ss), max_steps=max_steps, rtol=rtol, atol=atol)
     sa, ss, sa_err, ss_err, total, rel, chi2, steps, ok = out

@@ -77,9 +77,11 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     ref = check_image(reference, name="reference") - offset
     center = beam_center(ref)
     sigma = beam_sigma(ref, center, pixel_mm)
-    relative_var = (_sum_variance(meas, center, pixel_mm) / meas.sum(axis=(0, 1)) ** 2
-                    + _sum_variance(ref, center, pixel_mm) / ref.sum(axis=(0, 1)) ** 2)
-    total_stderr = np.abs(calibrated.total_reflectance) * np.sqrt(relative_var)
+    # The measurement's own noise enters the total; the reference's sum scales the profile
+    # and the total alike, so its error is passed separately as a shared scale error.
+    meas_relative_var = _sum_variance(meas, center, pixel_mm) / meas.sum(axis=(0, 1)) ** 2
+    scale_stderr = np.sqrt(_sum_variance(ref, center, pixel_mm)) / ref.sum(axis=(0, 1))
+    total_stderr = np.abs(calibrated.total_reflectance) * np.sqrt(meas_relative_var)
     r_min = r_min_mm or max(2 * pixel_mm, 2 * sigma)
     profile = radial_profile(calibrated.reflectance, center, pixel_mm, n_bins=n_bins, r_min_mm=r_min)
     # Only bins outside r_min enter the fit: the first (inner disc) bin is dropped.
@@ -102,5 +104,6 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     index[:used] = remap[profile.bin_index[keep_pixels]]
     fit = fit_medium(mean, err, eta, pixel_radii=radii, bin_index=index,
                      total_reflectance=calibrated.total_reflectance, total_stderr=total_stderr,
-                     field_radii=field, pixel_area=pixel_mm**2, beam_sigma=sigma, model=model, grid=grid)
+                     field_radii=field, pixel_area=pixel_mm**2, scale_stderr=scale_stderr, beam_sigma=sigma,
+                     model=model, grid=grid)
     return MeasurementFit(fit, profile, calibrated, center, sigma, tuple(channels))

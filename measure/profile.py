@@ -147,13 +147,35 @@ class RadialProfile:
     bin_index: np.ndarray
 
 
+def _pooled_variance(variance, mean, counts):
+    """Per-pixel variance as read + shot noise, ``a + b * mean``, fitted over all bins.
+
+    A bin's own scatter rests on few pixels near the centre (a chi-square of 2 degrees of
+    freedom for 4 pixels can be ten times too small); a linear camera's noise follows
+    ``a + b * signal``, so one fit per channel over all bins (weighted by their degrees of
+    freedom) gives every bin a stable variance.
+    """
+    dof = np.maximum(counts - 2, 0).astype(float)
+    pooled = np.empty_like(variance)
+    for c in range(variance.shape[1]):
+        x, y = np.clip(mean[:, c], 0, None), variance[:, c]
+        design = np.stack([np.ones_like(x), x], -1) * np.sqrt(dof)[:, None]
+        coeffs, *_ = np.linalg.lstsq(design, y * np.sqrt(dof), rcond=None)
+        a, b = np.maximum(coeffs, 0.0)
+        model = a + b * x
+        pooled[:, c] = np.where(model > 0, model, y)
+    return pooled
+
+
 def radial_profile(image, center, pixel_mm: float, *, n_bins: int = 64, r_min_mm: float | None = None,
-                   r_max_mm: float | None = None, min_count: int = 4) -> RadialProfile:
+                   r_max_mm: float | None = None, min_count: int = 4, pooled_noise: bool = True) -> RadialProfile:
     """Bin pixels into log-spaced annuli around ``center`` (row, col).
 
     Bins run from ``r_min_mm`` (default one pixel) to ``r_max_mm`` (default the largest
     circle inside the image); pixels inside ``r_min_mm`` form the first bin. Bins with
-    fewer than ``min_count`` pixels are merged away (dropped).
+    fewer than ``min_count`` pixels are dropped. With ``pooled_noise`` (default) the
+    per-pixel variance is the read + shot noise model fitted over all bins
+    (``_pooled_variance``) rather than each bin's own scatter.
     """
     image = check_image(image)
     h, w, _ = image.shape
@@ -185,7 +207,10 @@ def radial_profile(image, center, pixel_mm: float, *, n_bins: int = 64, r_min_mm
     slope = np.stack([per_bin(dr * values[:, c]) for c in range(values.shape[1])], -1) / np.maximum(sxx, 1e-300)[:, None]
     resid = values - mean[index] - slope[index] * dr[:, None]
     sq = np.stack([per_bin(resid[:, c] ** 2) for c in range(values.shape[1])], -1)
-    std = np.sqrt(sq / np.maximum(counts[:, None] - 2, 1))
+    variance = sq / np.maximum(counts[:, None] - 2, 1)
+    if pooled_noise:
+        variance = _pooled_variance(variance, mean, counts)
+    std = np.sqrt(variance)
     return RadialProfile(r_mean, mean, std / np.sqrt(counts[:, None]), counts, radii, index)
 
 
