@@ -44,20 +44,17 @@ def check_image(image, *, name: str = "image") -> np.ndarray:
 
 @dataclass(frozen=True)
 class Calibrated:
-    """Reflectance image [1/mm^2] ``(H, W, C)`` and the total diffuse reflectance ``(C,)``."""
+    """Reflectance image [1/mm^2] ``(H, W, C)`` and the total diffuse reflectance ``(C,)``
+    within the field of view (its error comes from :func:`measure.pipeline.fit_measurement`'s
+    noise model, which sees the whole image)."""
 
     reflectance: np.ndarray
     total_reflectance: np.ndarray
-    total_stderr: np.ndarray
 
 
 def calibrate(measurement, reference, pixel_mm: float, *, reference_reflectance: float = 0.99,
-              dark=None, read_noise=None) -> Calibrated:
-    """Calibrate a measurement by the white reference (module docstring).
-
-    ``read_noise`` (per pixel, image units) sets the total's standard error; by default it
-    is estimated from the outer border of the measurement, where little light arrives.
-    """
+              dark=None) -> Calibrated:
+    """Calibrate a measurement by the white reference (module docstring)."""
     meas = check_image(measurement, name="measurement")
     ref = check_image(reference, name="reference")
     if meas.shape != ref.shape:
@@ -77,12 +74,7 @@ def calibrate(measurement, reference, pixel_mm: float, *, reference_reflectance:
     area = pixel_mm**2
     reflectance = reference_reflectance * meas / (area * ref_sum)
     total = reference_reflectance * meas.sum(axis=(0, 1)) / ref_sum
-    if read_noise is None:
-        border = np.concatenate([meas[:4].reshape(-1, meas.shape[-1]), meas[-4:].reshape(-1, meas.shape[-1])])
-        read_noise = border.std(axis=0)
-    noise_sum = np.sqrt(meas.shape[0] * meas.shape[1]) * np.asarray(read_noise)
-    total_err = np.maximum(reference_reflectance * noise_sum / ref_sum, 1e-4 * np.abs(total))
-    return Calibrated(reflectance, total, total_err)
+    return Calibrated(reflectance, total)
 
 
 def beam_center(image, *, iterations: int = 5) -> tuple[float, float]:
