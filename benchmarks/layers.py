@@ -30,8 +30,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 from _timing import median_seconds  # noqa: E402
 
 from jsss import dipole, hankel  # noqa: E402
-from jsss.layers import combine_spectra, skin_three_layer, stack  # noqa: E402
-from jsss.medium import Medium  # noqa: E402
+from jsss.layers import combine_spectra, layer_boundaries, relative_to, skin_three_layer, stack  # noqa: E402
 from jsss.multipole import slab_profiles, unscattered_transmittance  # noqa: E402
 
 
@@ -89,18 +88,17 @@ def numpy_stack(layers, base, inverse_matrix, k):
 # ----------------------------------------------------------------------------- classic pipeline
 def classic_stack(layers, base, grid, n_dipoles):
     """Truncated multipole profiles -> numerical forward Hankel -> KM -> inverse Hankel."""
-    etas = [1.0] + [L.medium.eta for L in layers]
+    sides, above_base = layer_boundaries(layers, base)
     result = None
-    for j, L in enumerate(layers):
+    for L, (above, below) in zip(layers, sides):
         m, d = L.medium, L.thickness
-        eta_next = layers[j + 1].medium.eta if j + 1 < len(layers) else base.eta
-        Rd, Td = slab_profiles(m, d, grid.r, eta_top=m.eta / etas[j], eta_bottom=m.eta / eta_next, n_dipoles=n_dipoles)
-        Ru, Tu = slab_profiles(m, d, grid.r, eta_top=m.eta / eta_next, eta_bottom=m.eta / etas[j], n_dipoles=n_dipoles)
+        Rd, Td = slab_profiles(m, d, grid.r, eta_top=m.eta / above, eta_bottom=m.eta / below, n_dipoles=n_dipoles)
+        Ru, Tu = slab_profiles(m, d, grid.r, eta_top=m.eta / below, eta_bottom=m.eta / above, n_dipoles=n_dipoles)
         coll = unscattered_transmittance(m, d)
         spectra = (hankel.forward(grid, Rd), hankel.forward(grid, Td) + coll,
                    hankel.forward(grid, Ru), hankel.forward(grid, Tu) + coll)
         result = spectra if result is None else combine_spectra(result, spectra)
-    relative = Medium(base.sigma_a, base.sigma_s_prime, base.eta / etas[-1])
+    relative = relative_to(base, above_base)
     Rb = hankel.forward(grid, dipole.profile(relative, grid.r))
     zeros = jnp.zeros_like(Rb)
     return hankel.inverse(grid, combine_spectra(result, (Rb, zeros, zeros, zeros))[0])

@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.special import itj0y0, j0, j1
 
-__all__ = ["HankelGrid", "forward", "hankel_grid", "inverse"]
+__all__ = ["HankelGrid", "at_radii", "forward", "hankel_grid", "inverse"]
 
 
 class HankelGrid(eqx.Module):
@@ -141,3 +141,17 @@ def forward(grid: HankelGrid, profile):
 def inverse(grid: HankelGrid, spectrum):
     r""":math:`P(r)` on ``grid.r`` from ``spectrum`` sampled on ``grid.k``; shapes as :func:`forward`."""
     return jnp.tensordot(grid.inverse_matrix, jnp.asarray(spectrum), axes=1)
+
+
+def at_radii(grid: HankelGrid, profile, r):
+    """``profile`` sampled on ``grid.r`` (shape ``(N,) + C``), interpolated at radii ``r`` (shape ``S``).
+
+    Linear in log r; radii outside the grid take the value of its first or last node.
+    Returns shape ``S + C``.
+    """
+    profile = jnp.asarray(profile)
+    r = jnp.asarray(r)
+    x = jnp.log(jnp.clip(r, grid.r[0], grid.r[-1])).reshape(-1)
+    flat = profile.reshape(profile.shape[0], -1)
+    columns = [jnp.interp(x, jnp.log(grid.r), flat[:, c]) for c in range(flat.shape[1])]
+    return jnp.stack(columns, -1).reshape(r.shape + profile.shape[1:])

@@ -37,7 +37,16 @@ from .medium import Medium
 from .multipole import slab_spectra, unscattered_transmittance
 from .numerics import as_float_array, is_concrete
 
-__all__ = ["Layer", "StackResult", "combine_spectra", "skin_three_layer", "stack", "stack_spectra"]
+__all__ = [
+    "Layer",
+    "StackResult",
+    "combine_spectra",
+    "layer_boundaries",
+    "relative_to",
+    "skin_three_layer",
+    "stack",
+    "stack_spectra",
+]
 
 
 class Layer(eqx.Module):
@@ -105,16 +114,30 @@ def _layer_spectra(layer, k, eta_above, eta_below):
     return R_down, T_down + collimated, R_up, T_up + collimated
 
 
-def _relative(medium, eta_above):
-    """The medium with its index taken relative to the layer above it."""
-    return Medium(medium.sigma_a, medium.sigma_s_prime, medium.eta / eta_above)
-
-
 def _base_spectrum(base, k, eta_above):
     """Semi-infinite base: the d -> inf multipole (a dipole) against the layer above."""
-    R = dipole_spectrum(_relative(base, eta_above), k)
+    R = dipole_spectrum(relative_to(base, eta_above), k)
     zeros = jnp.zeros_like(R)
     return R, zeros, zeros, zeros
+
+
+def layer_boundaries(layers: Sequence[Layer], base: Medium | None = None, *, eta_above=1.0, eta_below=1.0):
+    """Absolute indices on either side of every layer, and above the base.
+
+    Returns a list of ``(index above, index below)`` per layer, top first, and the index
+    above the base (``None`` without one). A boundary's relative index is the layer's own
+    index over the neighbour's: the one convention every stack computation shares.
+    """
+    _check_layers(layers)
+    below = base.eta if base is not None else eta_below
+    above = [eta_above] + [layer.medium.eta for layer in layers]
+    sides = [(above[j], layers[j + 1].medium.eta if j + 1 < len(layers) else below) for j in range(len(layers))]
+    return sides, (above[-1] if base is not None else None)
+
+
+def relative_to(medium: Medium, eta_outside) -> Medium:
+    """The medium with its index taken relative to the medium outside it (e.g. the layer above)."""
+    return Medium(medium.sigma_a, medium.sigma_s_prime, medium.eta / eta_outside)
 
 
 def _check_layers(layers):
@@ -142,19 +165,15 @@ def stack_spectra(layers: Sequence[Layer], base: Medium | None = None, k=0.0, *,
     R_down, T_down, R_up, T_up : Arrays of shape ``S + C``; the unscattered fraction is
         included in ``T``. Over a base, ``T_down``, ``R_up``, ``T_up`` are zero.
     """
-    _check_layers(layers)
     if not layers and base is None:
         raise ValueError("stack needs at least one layer or a base medium.")
-    n = len(layers)
-    indices = [eta_above] + [layer.medium.eta for layer in layers]
-    below = base.eta if base is not None else eta_below
+    sides, above_base = layer_boundaries(layers, base, eta_above=eta_above, eta_below=eta_below)
     result = None
-    for j, layer in enumerate(layers):
-        eta_next = layers[j + 1].medium.eta if j + 1 < n else below
-        spectra = _layer_spectra(layer, k, indices[j], eta_next)
+    for layer, (above, below) in zip(layers, sides):
+        spectra = _layer_spectra(layer, k, above, below)
         result = spectra if result is None else combine_spectra(result, spectra)
     if base is not None:
-        base_spectra = _base_spectrum(base, k, indices[-1])
+        base_spectra = _base_spectrum(base, k, above_base)
         result = base_spectra if result is None else combine_spectra(result, base_spectra)
     return result
 
@@ -191,9 +210,11 @@ def stack(layers: Sequence[Layer], base: Medium | None = None, *, r=None, grid: 
     fallen below that, they may ring slightly below zero.
     """
     grid = hankel.hankel_grid() if grid is None else grid
-    R_hat, T_hat, R_up, T_up = stack_spectra(layers, base, grid.k, eta_above=eta_above,
-                                             eta_below=eta_below)
-    R0, T0, R_up0, T_up0 = stack_spectra(layers, base, 0.0, eta_above=eta_above, eta_below=eta_below)
+    # One pass over k = 0 (the totals) and the grid's frequencies.
+    k = jnp.concatenate([jnp.zeros(1, grid.k.dtype), grid.k])
+    R_all, T_all, R_up_all, T_up_all = stack_spectra(layers, base, k, eta_above=eta_above, eta_below=eta_below)
+    R0, T0, R_up0, T_up0 = R_all[0], T_all[0], R_up_all[0], T_up_all[0]
+    R_hat, T_hat = R_all[1:], T_all[1:]
     if base is not None:
         collimated = jnp.zeros_like(T0)
     else:
@@ -205,21 +226,13 @@ def stack(layers: Sequence[Layer], base: Medium | None = None, *, r=None, grid: 
     radii = grid.r
     if r is not None:
         radii = as_float_array(r)
-        R, T = (_interpolate_log(grid.r, values, radii) for values in (R, T))
+        R, T = hankel.at_radii(grid, R, radii), hankel.at_radii(grid, T, radii)
     return StackResult(
         r=radii, R=R, T=T, k=grid.k, R_hat=R_hat, T_hat=T_hat,
         R_total=R0, T_total=T0 - collimated, T_unscattered=collimated,
         R_below=None if base is not None else R_up0,
         T_below=None if base is not None else T_up0 - collimated,
     )
-
-
-def _interpolate_log(grid_r, values, r):
-    """Linear interpolation in log r along axis 0 of ``values`` (N,) + C onto ``r`` (M,)."""
-    x = jnp.log(jnp.maximum(r, grid_r[0]))
-    flat = values.reshape(values.shape[0], -1)
-    columns = [jnp.interp(x, jnp.log(grid_r), flat[:, c]) for c in range(flat.shape[1])]
-    return jnp.stack(columns, -1).reshape(r.shape + values.shape[1:])
 
 
 def skin_three_layer(*, dtype=None):

@@ -24,6 +24,7 @@ import numpy as np
 
 from .gaussian_sum import GaussianSum, reduce_to
 from .medium import Medium
+from .layers import layer_boundaries, relative_to
 from .multipole import unscattered_transmittance
 from .numerics import as_float_array, is_concrete
 from .pole_fit import empirical_dipole_fit, empirical_multipole_fit
@@ -173,18 +174,14 @@ def layers_as_gaussians(layers: Sequence, base: Medium | None = None, *, degree:
     """
     if not layers and base is None:
         raise ValueError("layers_as_gaussians needs at least one layer or a base medium.")
-    indices = [eta_above] + [layer.medium.eta for layer in layers]
-    below = base.eta if base is not None else eta_below
+    sides, above_base = layer_boundaries(layers, base, eta_above=eta_above, eta_below=eta_below)
     per_layer = []
-    for j, layer in enumerate(layers):
+    for layer, (above, below) in zip(layers, sides):
         m, d = layer.medium, layer.thickness
-        eta_next = layers[j + 1].medium.eta if j + 1 < len(layers) else below
-        down = empirical_multipole_fit(m, d, eta_top=m.eta / indices[j], eta_bottom=m.eta / eta_next)
-        up = empirical_multipole_fit(m, d, eta_top=m.eta / eta_next, eta_bottom=m.eta / indices[j])
+        down = empirical_multipole_fit(m, d, eta_top=m.eta / above, eta_bottom=m.eta / below)
+        up = empirical_multipole_fit(m, d, eta_top=m.eta / below, eta_bottom=m.eta / above)
         per_layer.append((down, up, unscattered_transmittance(m, d)))
-    base_fit = None
-    if base is not None:
-        base_fit = empirical_dipole_fit(Medium(base.sigma_a, base.sigma_s_prime, base.eta / indices[-1]))
+    base_fit = None if base is None else empirical_dipole_fit(relative_to(base, above_base))
     if base_variance is None:
         base_variance = _default_base_variance([layer.medium for layer in layers] + ([base] if base is not None else []))
 

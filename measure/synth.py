@@ -42,10 +42,8 @@ def _exitance(medium: Medium, radii_mm: np.ndarray, beam_sigma_mm: float, grid=N
     """Dipole convolved with the Gaussian beam at the given radii, shape radii.shape + C."""
     grid = hankel.hankel_grid() if grid is None else grid
     spectrum = dipole.spectrum(medium, grid.k) * np.exp(-np.asarray(grid.k)[:, None] ** 2 * beam_sigma_mm**2 / 2)
-    on_grid = np.asarray(hankel.inverse(grid, spectrum)).reshape(grid.r.shape[0], -1)
-    log_r = np.log(np.maximum(radii_mm.ravel(), float(grid.r[0])))
-    cols = [np.interp(log_r, np.log(np.asarray(grid.r)), on_grid[:, c]) for c in range(on_grid.shape[1])]
-    return np.stack(cols, -1).reshape(radii_mm.shape + (on_grid.shape[1],))
+    on_grid = hankel.inverse(grid, spectrum)
+    return np.asarray(hankel.at_radii(grid, on_grid, radii_mm)).reshape(radii_mm.shape + (-1,))
 
 
 def _beam(radii_mm, beam_sigma_mm, channels):
