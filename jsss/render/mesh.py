@@ -1,0 +1,203 @@
+"""Triangle meshes with UVs: the built-in procedural shapes and OBJ loading.
+
+A :class:`Mesh` is plain NumPy (float64 positions in mm, UVs in [0, 1]^2): geometry is fixed
+while materials and lights change, so everything derived from it (texel positions,
+rasterized views, shadow maps) is computed once and handed to the JAX passes as arrays.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Mesh", "box", "fin", "load_obj", "plane", "uv_sphere"]
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """Triangles with per-vertex positions [mm], unit normals and UVs.
+
+    Attributes
+    ----------
+    vertices : ndarray, shape (V, 3)
+    normals : ndarray, shape (V, 3)
+    uvs : ndarray, shape (V, 2)
+        In [0, 1]; ``u`` runs along texture columns, ``v`` along rows.
+    faces : ndarray of int, shape (F, 3)
+        Counter-clockwise seen from outside (the normal's side).
+    wrap_u : bool
+        The texture is periodic in ``u`` (a sphere's longitude): blurs wrap around.
+    name : str
+    """
+
+    vertices: np.ndarray
+    normals: np.ndarray
+    uvs: np.ndarray
+    faces: np.ndarray
+    wrap_u: bool = False
+    name: str = "mesh"
+    _digest: list = field(default_factory=list, repr=False)
+
+    def __post_init__(self):
+        v, n, t, f = (np.asarray(a) for a in (self.vertices, self.normals, self.uvs, self.faces))
+        if v.ndim != 2 or v.shape[1] != 3 or n.shape != v.shape:
+            raise ValueError(f"Mesh {self.name!r}: vertices and normals must both be (V, 3); got {v.shape}, {n.shape}.")
+        if t.shape != (len(v), 2):
+            raise ValueError(f"Mesh {self.name!r}: uvs must be (V, 2) = ({len(v)}, 2); got {t.shape}.")
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+            raise ValueError(f"Mesh {self.name!r}: faces must be a non-empty (F, 3) array; got {f.shape}.")
+        if f.min() < 0 or f.max() >= len(v):
+            raise ValueError(f"Mesh {self.name!r}: face indices must lie in [0, {len(v) - 1}].")
+        if not (np.all(np.isfinite(v)) and np.all(np.isfinite(t))):
+            raise ValueError(f"Mesh {self.name!r}: vertices and uvs must be finite.")
+        norm = np.linalg.norm(n, axis=1, keepdims=True)
+        object.__setattr__(self, "vertices", v.astype(np.float64))
+        object.__setattr__(self, "normals", (n / np.where(norm > 0, norm, 1)).astype(np.float64))
+        object.__setattr__(self, "uvs", t.astype(np.float64))
+        object.__setattr__(self, "faces", f.astype(np.int64))
+
+    def digest(self) -> str:
+        """A hash of the geometry (for caches keyed by the mesh)."""
+        if not self._digest:
+            h = hashlib.sha256()
+            for a in (self.vertices, self.uvs, self.faces):
+                h.update(np.ascontiguousarray(a).tobytes())
+            self._digest.append(h.hexdigest()[:16])
+        return self._digest[0]
+
+    def transformed(self, *, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> "Mesh":
+        """The mesh scaled about the origin, then moved."""
+        return Mesh(self.vertices * scale + np.asarray(translate, float), self.normals, self.uvs,
+                    self.faces, self.wrap_u, self.name)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+
+def _grid_faces(rows: int, cols: int) -> np.ndarray:
+    """Two counter-clockwise triangles per cell of a (rows+1) x (cols+1) vertex grid."""
+    i, j = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+    a = (i * (cols + 1) + j).ravel()
+    b, c, d = a + 1, a + cols + 1, a + cols + 2
+    return np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+
+
+def _outward(vertices, normals, faces):
+    """Faces re-wound where needed so that each is counter-clockwise seen from its normals' side."""
+    p = vertices[faces]
+    geometric = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    flip = np.einsum("ij,ij->i", geometric, normals[faces].sum(1)) < 0
+    return np.where(flip[:, None], faces[:, [0, 2, 1]], faces)
+
+
+def uv_sphere(radius: float = 10.0, *, segments: int = 64, rings: int = 32) -> Mesh:
+    """A latitude-longitude sphere centred at the origin; ``u`` is longitude (wraps)."""
+    if radius <= 0 or segments < 3 or rings < 2:
+        raise ValueError(f"uv_sphere needs radius > 0, segments >= 3, rings >= 2; got {radius}, {segments}, {rings}.")
+    theta = np.linspace(0, np.pi, rings + 1)  # from the north pole (+z)
+    phi = np.linspace(0, 2 * np.pi, segments + 1)
+    T, P = np.meshgrid(theta, phi, indexing="ij")
+    n = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
+    uv = np.stack([P / (2 * np.pi), T / np.pi], -1).reshape(-1, 2)
+    faces = _outward(radius * n, n, _grid_faces(rings, segments))
+    return Mesh(radius * n, n, uv, faces, wrap_u=True, name=f"sphere(r={radius:g})")
+
+
+def plane(width: float = 40.0, depth: float | None = None, *, segments: int = 1) -> Mesh:
+    """A flat rectangle in z = 0 facing +z, centred at the origin; UVs span it once."""
+    depth = width if depth is None else depth
+    if width <= 0 or depth <= 0 or segments < 1:
+        raise ValueError(f"plane needs width, depth > 0 and segments >= 1; got {width}, {depth}, {segments}.")
+    s = np.linspace(0, 1, segments + 1)
+    V, U = np.meshgrid(s, s, indexing="ij")
+    pos = np.stack([(U - 0.5) * width, (0.5 - V) * depth, np.zeros_like(U)], -1).reshape(-1, 3)
+    uv = np.stack([U, V], -1).reshape(-1, 2)
+    normals = np.tile([0.0, 0.0, 1.0], (len(pos), 1))
+    faces = _outward(pos, normals, _grid_faces(segments, segments))
+    return Mesh(pos, normals, uv, faces, name=f"plane({width:g}x{depth:g})")
+
+
+def box(size=(20.0, 20.0, 20.0), *, segments: int = 8) -> Mesh:
+    """An axis-aligned box centred at the origin; its six faces tile the texture in a 3 x 2 atlas."""
+    size = np.broadcast_to(np.asarray(size, float), (3,))
+    if np.any(size <= 0):
+        raise ValueError(f"box size must be positive; got {size.tolist()}.")
+    s = np.linspace(0, 1, segments + 1)
+    V, U = np.meshgrid(s, s, indexing="ij")
+    pad = 0.02  # gutter between atlas tiles so that a blur or a lookup does not mix faces
+    parts, offset = [], 0
+    for tile, (axis, sign) in enumerate([(0, 1), (0, -1), (1, 1), (1, -1), (2, 1), (2, -1)]):
+        a, b = [i for i in range(3) if i != axis]
+        pos = np.zeros(U.shape + (3,))
+        pos[..., a] = (U - 0.5) * size[a]
+        pos[..., b] = (0.5 - V) * size[b]
+        pos[..., axis] = sign * size[axis] / 2
+        n = np.zeros_like(pos)
+        n[..., axis] = sign
+        col, row = tile % 3, tile // 3
+        uv = np.stack([(col + pad + U * (1 - 2 * pad)) / 3, (row + pad + V * (1 - 2 * pad)) / 2], -1)
+        parts.append((pos.reshape(-1, 3), n.reshape(-1, 3), uv.reshape(-1, 2),
+                      _grid_faces(segments, segments) + offset))
+        offset += pos.size // 3
+    v, nn, t, f = (np.concatenate(p) for p in zip(*parts))
+    return Mesh(v, nn, t, _outward(v, nn, f), name=f"box({size[0]:g}x{size[1]:g}x{size[2]:g})")
+
+
+def fin(height: float = 30.0, radius: float = 40.0, thickness: float = 2.0, *, arc_degrees: float = 60.0,
+        segments: int = 32) -> Mesh:
+    """A thin curved shell (a piece of a cylinder wall): light passes through it.
+
+    The outer wall faces +x at the middle; the UV atlas holds the outer wall in the left
+    half and the inner wall in the right half (the narrow rims are left out: at
+    ``thickness`` << ``height`` they carry almost no light). The surface is open at its
+    rims, so it is for showing transmission, not for closed-surface energy checks.
+    """
+    if min(height, radius, thickness) <= 0 or thickness >= radius:
+        raise ValueError(f"fin needs height, radius, thickness > 0 and thickness < radius; "
+                         f"got {height}, {radius}, {thickness}.")
+    s = np.linspace(0, 1, segments + 1)
+    V, U = np.meshgrid(s, s, indexing="ij")
+    phi = np.deg2rad(arc_degrees) * (U - 0.5)
+    z = (0.5 - V) * height
+    pad = 0.02
+    parts, offset = [], 0
+    for half, (r, sign) in enumerate([(radius, 1.0), (radius - thickness, -1.0)]):
+        pos = np.stack([r * np.cos(phi) - radius, r * np.sin(phi), z], -1)
+        n = sign * np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], -1)
+        uv = np.stack([(half + pad + U * (1 - 2 * pad)) / 2, pad + V * (1 - 2 * pad)], -1)
+        faces = _grid_faces(segments, segments) + offset
+        parts.append((pos.reshape(-1, 3), n.reshape(-1, 3), uv.reshape(-1, 2), faces))
+        offset += pos.size // 3
+    v, nn, t, f = (np.concatenate(p) for p in zip(*parts))
+    return Mesh(v, nn, t, _outward(v, nn, f), name=f"fin(t={thickness:g})")
+
+
+def load_obj(path) -> Mesh:
+    """Read a triangle mesh with texture coordinates from a Wavefront OBJ (via trimesh).
+
+    Raises
+    ------
+    ValueError
+        The file is missing, not a mesh, or has no UVs; the message names the file.
+    """
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such OBJ file.")
+    try:
+        loaded = trimesh.load(path, process=False, force="mesh")
+    except Exception as error:  # trimesh raises many types for a bad file
+        raise ValueError(f"{path}: not a readable OBJ mesh ({error}).") from error
+    uv = getattr(loaded.visual, "uv", None)
+    if uv is None or len(uv) != len(loaded.vertices):
+        raise ValueError(f"{path}: the mesh has no per-vertex texture coordinates (vt); "
+                         "texture-space diffusion needs a UV layout.")
+    uv = np.asarray(uv, float).copy()
+    uv[:, 1] = 1.0 - uv[:, 1]  # OBJ's v runs upwards, texture rows downwards
+    return Mesh(np.asarray(loaded.vertices), np.asarray(loaded.vertex_normals), uv,
+                np.asarray(loaded.faces), name=path.stem)

@@ -1,0 +1,198 @@
+"""Visibility by rasterization: which triangle covers each pixel, where, and how deep.
+
+Rasterization decides *which surface* a pixel sees; it does not depend on the material or
+the light's intensity, so it runs once per view in NumPy and the JAX passes gather the
+surface attributes with its triangle ids and barycentric weights (a deferred renderer).
+Gradients with respect to materials and lights flow through those gathers; the
+visibility itself is held fixed (no edge gradients).
+
+Views map world points to continuous pixel coordinates (x along columns, y along rows,
+pixel centres at ``i + 0.5``) and a positive depth along the view direction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["OrthographicView", "PerspectiveView", "Raster", "rasterize", "surface_attributes"]
+
+_MAX_CANDIDATES = 1 << 22  # (triangle, pixel) pairs tested at once: bounds the memory of one chunk
+
+
+def _basis(forward, up):
+    forward = np.asarray(forward, float)
+    forward = forward / np.linalg.norm(forward)
+    up = np.asarray(up, float)
+    if abs(np.dot(forward, up / np.linalg.norm(up))) > 0.999:  # looking along up: pick another
+        up = np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    return right, down, forward
+
+
+@dataclass(frozen=True)
+class PerspectiveView:
+    """A pinhole camera at ``position`` looking at ``look_at``; ``fov_degrees`` is vertical."""
+
+    position: tuple
+    look_at: tuple
+    fov_degrees: float
+    width: int
+    height: int
+    up: tuple = (0.0, 0.0, 1.0)
+
+    def __post_init__(self):
+        if np.allclose(self.position, self.look_at):
+            raise ValueError("camera: position and look_at must differ.")
+        if not 0 < self.fov_degrees < 180:
+            raise ValueError(f"camera: fov must lie in (0, 180) degrees; got {self.fov_degrees}.")
+        if self.width < 1 or self.height < 1:
+            raise ValueError(f"camera: resolution must be positive; got {self.width} x {self.height}.")
+
+    @property
+    def focal(self) -> float:
+        """Pixels per unit of tangent."""
+        return 0.5 * self.height / np.tan(np.deg2rad(self.fov_degrees) / 2)
+
+    def project(self, points):
+        right, down, forward = _basis(np.subtract(self.look_at, self.position), self.up)
+        rel = np.asarray(points, float) - np.asarray(self.position, float)
+        depth = rel @ forward
+        safe = np.where(depth > 1e-9, depth, np.nan)
+        x = self.width / 2 + self.focal * (rel @ right) / safe
+        y = self.height / 2 + self.focal * (rel @ down) / safe
+        return np.stack([x, y], -1), depth
+
+    def pixel_size(self, depth):
+        """World size [mm] of one pixel at ``depth``."""
+        return np.asarray(depth) / self.focal
+
+    def directions(self) -> np.ndarray:
+        """Unit vectors from the camera through each pixel centre, shape (H, W, 3)."""
+        right, down, forward = _basis(np.subtract(self.look_at, self.position), self.up)
+        x = (np.arange(self.width) + 0.5 - self.width / 2) / self.focal
+        y = (np.arange(self.height) + 0.5 - self.height / 2) / self.focal
+        d = forward + x[None, :, None] * right + y[:, None, None] * down
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class OrthographicView:
+    """A parallel projection along ``direction`` covering a square of ``extent`` mm."""
+
+    direction: tuple
+    center: tuple
+    extent: float
+    size: int
+
+    def project(self, points):
+        right, down, forward = _basis(self.direction, (0.0, 0.0, 1.0))
+        rel = np.asarray(points, float) - np.asarray(self.center, float)
+        scale = self.size / self.extent
+        xy = np.stack([rel @ right, rel @ down], -1) * scale + self.size / 2
+        return xy, rel @ forward + self.extent  # depth kept positive
+
+    def pixel_size(self, depth=None):
+        return self.extent / self.size
+
+
+@dataclass(frozen=True)
+class Raster:
+    """Per pixel: covering triangle (``-1`` for none), barycentric weights, depth."""
+
+    face: np.ndarray
+    bary: np.ndarray
+    depth: np.ndarray
+
+    @property
+    def mask(self) -> np.ndarray:
+        return self.face >= 0
+
+
+def _chunks(counts):
+    start, total = 0, 0
+    for i, c in enumerate(counts):
+        if total + c > _MAX_CANDIDATES and i > start:
+            yield start, i
+            start, total = i, 0
+        total += c
+    if start < len(counts):
+        yield start, len(counts)
+
+
+def rasterize(xy, depth, faces, shape, *, perspective: bool = True) -> Raster:
+    """Depth-tested coverage of triangles at pixel centres.
+
+    Parameters
+    ----------
+    xy : ndarray, shape (V, 2)
+        Continuous pixel coordinates of the vertices (NaN for vertices behind the view).
+    depth : ndarray, shape (V,)
+        Positive depth per vertex; smaller is nearer.
+    faces : ndarray of int, shape (F, 3)
+    shape : (H, W)
+    perspective : bool, keyword-only
+        Interpolate with perspective correction (weights over depth) rather than linearly.
+
+    Returns
+    -------
+    Raster
+    """
+    H, W = shape
+    faces = np.asarray(faces)
+    p = np.asarray(xy, float)[faces]  # (F, 3, 2)
+    z = np.asarray(depth, float)[faces]
+    area = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
+    ok = np.all(np.isfinite(p), axis=(1, 2)) & np.all(z > 0, axis=1) & (np.abs(area) > 1e-12)
+    x0 = np.clip(np.ceil(np.nanmin(p[..., 0], 1) - 0.5), 0, W).astype(np.int64)
+    x1 = np.clip(np.floor(np.nanmax(p[..., 0], 1) - 0.5), -1, W - 1).astype(np.int64)
+    y0 = np.clip(np.ceil(np.nanmin(p[..., 1], 1) - 0.5), 0, H).astype(np.int64)
+    y1 = np.clip(np.floor(np.nanmax(p[..., 1], 1) - 0.5), -1, H - 1).astype(np.int64)
+    bw, bh = np.maximum(x1 - x0 + 1, 0), np.maximum(y1 - y0 + 1, 0)
+    counts = np.where(ok, bw * bh, 0)
+    best_depth = np.full(H * W, np.inf)
+    best_face = np.full(H * W, -1, np.int64)
+    best_bary = np.zeros((H * W, 3))
+    for a, b in _chunks(counts):
+        n = counts[a:b]
+        if n.sum() == 0:
+            continue
+        tri = np.repeat(np.arange(a, b), n)
+        k = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+        px = x0[tri] + k % bw[tri]
+        py = y0[tri] + k // bw[tri]
+        cx, cy = px + 0.5, py + 0.5
+        t = p[tri]
+        # Edge functions: barycentric weight of vertex i is the area opposite it.
+        w0 = (t[:, 1, 0] - cx) * (t[:, 2, 1] - cy) - (t[:, 2, 0] - cx) * (t[:, 1, 1] - cy)
+        w1 = (t[:, 2, 0] - cx) * (t[:, 0, 1] - cy) - (t[:, 0, 0] - cx) * (t[:, 2, 1] - cy)
+        bary = np.stack([w0, w1, area[tri] - w0 - w1], -1) / area[tri, None]
+        inside = np.all(bary >= -1e-9, axis=1)
+        tri, bary, pix = tri[inside], bary[inside], (py * W + px)[inside]
+        if perspective:
+            inv = bary / z[tri]
+            d = 1.0 / inv.sum(1)
+            bary = inv * d[:, None]
+        else:
+            d = (bary * z[tri]).sum(1)
+        order = np.lexsort((d, pix))
+        pix, d, tri, bary = pix[order], d[order], tri[order], bary[order]
+        first = np.ones(len(pix), bool)
+        first[1:] = pix[1:] != pix[:-1]
+        pix, d, tri, bary = pix[first], d[first], tri[first], bary[first]
+        nearer = d < best_depth[pix]
+        pix = pix[nearer]
+        best_depth[pix], best_face[pix], best_bary[pix] = d[nearer], tri[nearer], bary[nearer]
+    return Raster(best_face.reshape(H, W), best_bary.reshape(H, W, 3), best_depth.reshape(H, W))
+
+
+def surface_attributes(raster: Raster, faces, attribute) -> np.ndarray:
+    """Interpolate a per-vertex ``attribute`` (V, K) at every covered pixel; zeros elsewhere."""
+    attribute = np.asarray(attribute, float)
+    face = np.where(raster.mask, raster.face, 0)
+    corners = attribute[np.asarray(faces)[face]]  # (H, W, 3, K)
+    values = np.einsum("hwc,hwck->hwk", raster.bary, corners)
+    return np.where(raster.mask[..., None], values, 0.0)

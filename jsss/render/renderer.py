@@ -1,0 +1,211 @@
+"""Run a plan: static geometry once (NumPy), then the differentiable JAX passes.
+
+:func:`prepare` computes everything that depends only on geometry (texel positions,
+shadow maps, the camera's visibility); :func:`render_image` is a pure JAX function of the
+material's Gaussian weights and variances and the lights' radiant colours, so ``jit``
+and ``grad`` go through it. :func:`render` is the convenience that does both and can time
+each pass.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .blur import blur_schedule, hierarchical_blur
+from .lighting import irradiance, light_geometry, lookup, shadow_map, translucent_transmission
+from .planner import Plan, plan_scene
+from .profiles import render_profile
+from .raster import rasterize, surface_attributes
+from .scene import Scene
+from .shading import diffuse_radiance, specular_radiance
+from .texture_space import TexelGeometry, bake_texels
+
+__all__ = ["Prepared", "RenderParams", "RenderResult", "prepare", "render", "render_image", "render_params"]
+
+
+class RenderParams(eqx.Module):
+    """The differentiable inputs of a frame.
+
+    Attributes
+    ----------
+    weights : (n, 3) Gaussian weights per channel; variances : (n,) [mm^2]
+    radiant : (L, 3) colour times intensity of each light
+    eta : (3,) relative index of refraction
+    """
+
+    weights: jax.Array
+    variances: jax.Array
+    radiant: jax.Array
+    eta: jax.Array
+
+
+def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32) -> RenderParams:
+    """Parameters of ``scene`` under ``plan``; ``medium`` replaces a homogeneous material's medium
+    (pass a traced one to differentiate with respect to sigma_a, sigma_s' or eta)."""
+    gs = render_profile(scene.material, plan.variances, medium=medium)
+    radiant = np.array([np.asarray(l.color) * l.intensity for l in scene.lights])
+    eta = scene.material.eta if medium is None else medium.eta
+    eta = jnp.broadcast_to(jnp.asarray(eta), (3,))
+    return RenderParams(jnp.asarray(gs.weights, dtype), jnp.asarray(gs.variances, dtype),
+                        jnp.asarray(radiant, dtype), eta.astype(dtype))
+
+
+@dataclass(frozen=True, eq=False)
+class Prepared:
+    """Geometry-only data of a scene under a plan (NumPy arrays)."""
+
+    texels: TexelGeometry
+    texel_lights: tuple
+    pixel_mask: np.ndarray
+    pixel_uv: np.ndarray
+    pixel_normal: np.ndarray
+    pixel_view: np.ndarray
+    pixel_lights: tuple
+    stretch: np.ndarray
+    schedule: object
+    lights: tuple
+
+
+def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepared:
+    """Bake texels, shadow maps and the camera's visibility for ``scene`` at ``plan``'s sizes."""
+    timings = {} if timings is None else timings
+    t0 = time.perf_counter()
+    texels = bake_texels(scene.mesh, plan.texture_size)
+    timings["texture geometry"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    maps = [shadow_map(scene.mesh, light, size=scene.shadow_map_size) for light in scene.lights]
+    texel_lights = tuple(light_geometry(texels.position, texels.normal, texels.mask, light, m)
+                         for light, m in zip(scene.lights, maps))
+    timings["shadows"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    cam = scene.camera
+    xy, depth = cam.project(scene.mesh.vertices)
+    raster = rasterize(xy, depth, scene.mesh.faces, (cam.height, cam.width))
+    mask = raster.mask
+    position = surface_attributes(raster, scene.mesh.faces, scene.mesh.vertices)
+    normal = surface_attributes(raster, scene.mesh.faces, scene.mesh.normals)
+    normal /= np.where(mask, np.linalg.norm(normal, axis=-1), 1.0)[..., None]
+    uv = surface_attributes(raster, scene.mesh.faces, scene.mesh.uvs)
+    view = np.asarray(cam.position, float) - position
+    view /= np.where(mask, np.linalg.norm(view, axis=-1), 1.0)[..., None]
+    # Two-sided: a surface seen from behind (an open fin) is shaded from the side we see.
+    flip = (normal * view).sum(-1) < 0
+    normal = np.where(flip[..., None], -normal, normal)
+    pixel_lights = tuple(light_geometry(position, normal, mask, light, m) for light, m in zip(scene.lights, maps))
+    timings["camera raster"] = time.perf_counter() - t0
+    if plan.on("stretch correction"):
+        stretch = texels.stretch
+    else:  # uniform: the median texel length everywhere
+        stretch = np.where(texels.mask[..., None], texels.median_stretch(), 0.0)
+    schedule = blur_schedule(np.asarray(plan.variances), texels.median_stretch(), max_ratio=plan.max_ratio) \
+        if plan.on("diffusion") else None
+    return Prepared(texels, texel_lights, mask, uv, normal, view, pixel_lights, stretch, schedule, scene.lights)
+
+
+def _as(tree, dtype):
+    return jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), tree)
+
+
+def irradiance_pass(params: RenderParams, prep: Prepared):
+    lights = [_as(g, params.radiant.dtype) for g in prep.texel_lights]
+    return irradiance(lights, params.radiant, params.eta)
+
+
+def diffusion_pass(params: RenderParams, prep: Prepared, plan: Plan, E):
+    """Blurred irradiance per Gaussian (n, S, S, 3), or the irradiance itself n times without diffusion."""
+    dtype = E.dtype
+    if not plan.on("diffusion"):
+        return jnp.broadcast_to(E, (len(plan.variances),) + E.shape)
+    return hierarchical_blur(E, jnp.asarray(prep.texels.mask, dtype), jnp.asarray(prep.stretch, dtype),
+                             params.variances, prep.schedule, taps=plan.taps, wrap_u=prep.texels.wrap_u)
+
+
+def exitance_pass(params: RenderParams, prep: Prepared, plan: Plan, blurred):
+    M = jnp.einsum("nc,nhwc->hwc", params.weights, blurred)
+    if plan.on("translucent shadow maps"):
+        lights = [_as(g, blurred.dtype) for g in prep.texel_lights]
+        M = M + translucent_transmission(blurred, params.weights, params.variances, lights,
+                                         jnp.asarray(prep.texels.mask, blurred.dtype))
+    return M
+
+
+def camera_pass(params: RenderParams, prep: Prepared, plan: Plan, M, roughness: float, specular: float):
+    dtype = M.dtype
+    mask = jnp.asarray(prep.pixel_mask, dtype)
+    exitance = lookup(M, prep.pixel_uv, prep.texels.mask)
+    cos_view = jnp.asarray((prep.pixel_normal * prep.pixel_view).sum(-1), dtype)
+    L = diffuse_radiance(exitance, cos_view, params.eta)
+    if plan.on("specular"):
+        lights = [_as(g, dtype) for g in prep.pixel_lights]
+        L = L + specular_radiance(prep.pixel_normal, prep.pixel_view, prep.lights, lights, params.radiant,
+                                  params.eta, roughness=roughness, weight=specular)
+    return L * mask[..., None]
+
+
+def render_image(params: RenderParams, prep: Prepared, plan: Plan, *, roughness: float = 0.35,
+                 specular: float = 1.0):
+    """Linear radiance (H, W, 3) of a prepared scene: a pure function of ``params``."""
+    E = irradiance_pass(params, prep)
+    blurred = diffusion_pass(params, prep, plan, E)
+    M = exitance_pass(params, prep, plan, blurred)
+    return camera_pass(params, prep, plan, M, roughness, specular)
+
+
+@dataclass(frozen=True, eq=False)
+class RenderResult:
+    """A rendered frame: linear radiance, the plan it followed and seconds per pass."""
+
+    radiance: np.ndarray
+    plan: Plan
+    timings: dict
+    prepared: Prepared
+
+
+def _timed(fn, *args, repeats: int):
+    fn(*args)  # compile
+    best = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(fn(*args))
+        best.append(time.perf_counter() - t0)
+    return out, float(np.median(best))
+
+
+def render(scene: Scene, plan: Plan | None = None, *, dtype=jnp.float32, time_passes: bool = False,
+           repeats: int = 3) -> RenderResult:
+    """Plan (unless given), prepare and render ``scene``.
+
+    With ``time_passes`` every JAX pass is compiled first and timed (median of ``repeats``);
+    otherwise the whole frame runs as one jitted function.
+    """
+    timings: dict = {}
+    if plan is None:
+        t0 = time.perf_counter()
+        plan = plan_scene(scene)
+        timings["plan"] = time.perf_counter() - t0
+    prep = prepare(scene, plan, timings=timings)
+    params = render_params(scene, plan, dtype=dtype)
+    material = scene.material
+    if not time_passes:
+        frame = jax.jit(lambda p: render_image(p, prep, plan, roughness=material.roughness,
+                                               specular=material.specular))
+        t0 = time.perf_counter()
+        radiance = np.asarray(frame(params))
+        timings["frame (with compile)"] = time.perf_counter() - t0
+        return RenderResult(radiance, plan, timings, prep)
+    E, timings["irradiance"] = _timed(jax.jit(lambda p: irradiance_pass(p, prep)), params, repeats=repeats)
+    blurred, timings["diffusion"] = _timed(jax.jit(lambda p, e: diffusion_pass(p, prep, plan, e)), params, E,
+                                           repeats=repeats)
+    M, timings["exitance + translucency"] = _timed(jax.jit(lambda p, b: exitance_pass(p, prep, plan, b)),
+                                                   params, blurred, repeats=repeats)
+    radiance, timings["camera"] = _timed(
+        jax.jit(lambda p, m: camera_pass(p, prep, plan, m, material.roughness, material.specular)), params, M,
+        repeats=repeats)
+    return RenderResult(np.asarray(radiance), plan, timings, prep)
+

@@ -1,0 +1,329 @@
+"""Scenes: one object, its material, lights, a camera and an accuracy target, from TOML.
+
+A scene file (lengths in mm, coefficients in 1/mm)::
+
+    [geometry]
+    shape = "sphere"          # sphere | plane | box | fin | obj
+    radius = 20.0             # shape parameters (see jsss.render.mesh); obj: path = "head.obj"
+
+    [material]
+    name = "marble"           # a Jensen 2001 material, or sigma_a/sigma_s_prime/eta,
+                              # or preset = "skin", or [[material.layers]] (+ [material.base]),
+                              # or [material.gaussians] variances/weights/eta
+    roughness = 0.35          # specular lobe (Beckmann m); specular = 0 turns it off
+
+    [[lights]]
+    type = "directional"      # or "point" with position = [x, y, z]
+    direction = [-1, 0.3, -1] # the direction light travels
+    color = [1, 1, 1]
+    intensity = 1.0
+
+    [camera]
+    position = [0, -120, 40]
+    look_at = [0, 0, 0]
+    fov = 30                  # vertical, degrees
+    resolution = [320, 240]
+
+    [render]
+    accuracy = 0.05           # target relative error of the subsurface light
+    texture_size = 512        # the largest texture the planner may choose
+
+Every problem is reported as ``file: [table] key: what is wrong`` (:class:`SceneError`).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import layers as _layers
+from ..gaussian_sum import GaussianSum
+from ..materials import jensen2001, jensen2001_names
+from ..medium import Medium
+from . import mesh as _mesh
+from .lighting import Light
+from .raster import PerspectiveView
+
+__all__ = ["Material", "Scene", "SceneError", "load_scene", "parse_scene"]
+
+
+class SceneError(ValueError):
+    """A scene file or table is invalid; the message names the file, the key and the problem."""
+
+
+@dataclass(frozen=True, eq=False)
+class Material:
+    """What the renderer needs of a material: its profile's source and its surface.
+
+    Exactly one of ``medium`` (homogeneous, semi-infinite), ``layers`` (+ optional ``base``)
+    or ``gaussians`` (a given profile) is set. ``eta`` (3,) is the index the surface's
+    Fresnel terms use (the top layer's for a stack).
+    """
+
+    label: str
+    eta: np.ndarray
+    medium: Medium | None = None
+    layers: tuple = ()
+    base: Medium | None = None
+    gaussians: GaussianSum | None = None
+    specular: float = 1.0
+    roughness: float = 0.35
+
+    @property
+    def kind(self) -> str:
+        if self.gaussians is not None:
+            return "gaussians"
+        return "layers" if self.layers else "medium"
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    mesh: _mesh.Mesh
+    material: Material
+    lights: tuple
+    camera: PerspectiveView
+    accuracy: float = 0.05
+    texture_size: int = 512
+    shadow_map_size: int = 512
+    exposure: float | None = None
+    source: str = "<scene>"
+    extras: dict = field(default_factory=dict)
+
+
+class _Table:
+    """Typed reads from one TOML table with errors that name the file, table and key."""
+
+    def __init__(self, data, name: str, source: str):
+        if not isinstance(data, dict):
+            raise SceneError(f"{source}: [{name}] must be a table; got {type(data).__name__}.")
+        self.data, self.name, self.source = data, name, source
+        self.used = set()
+
+    def fail(self, key: str, problem: str):
+        raise SceneError(f"{self.source}: [{self.name}] {key}: {problem}")
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str, default=...):
+        self.used.add(key)
+        if key not in self.data:
+            if default is ...:
+                self.fail(key, "missing (required).")
+            return default
+        return self.data[key]
+
+    def number(self, key: str, default=..., *, positive=False, nonnegative=False, integer=False):
+        value = self.raw(key, default)
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(key, f"must be a number; got {value!r}.")
+        if integer and int(value) != value:
+            self.fail(key, f"must be an integer; got {value!r}.")
+        if not np.isfinite(value):
+            self.fail(key, f"must be finite; got {value!r}.")
+        if positive and value <= 0:
+            self.fail(key, f"must be > 0; got {value!r}.")
+        if nonnegative and value < 0:
+            self.fail(key, f"must be >= 0; got {value!r}.")
+        return int(value) if integer else float(value)
+
+    def vector(self, key: str, n: int, default=..., *, nonnegative=False, positive=False, scalar_ok=False):
+        value = self.raw(key, default)
+        if scalar_ok and isinstance(value, (int, float)) and not isinstance(value, bool):
+            value = [value] * n
+        if not isinstance(value, (list, tuple)) or len(value) != n or \
+                not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
+            self.fail(key, f"must be a list of {n} numbers; got {value!r}.")
+        arr = np.asarray(value, float)
+        if not np.all(np.isfinite(arr)):
+            self.fail(key, f"must be finite; got {value!r}.")
+        if nonnegative and np.any(arr < 0):
+            self.fail(key, f"must be >= 0 (a negative coefficient is unphysical); got {value!r}.")
+        if positive and np.any(arr <= 0):
+            self.fail(key, f"must be > 0; got {value!r}.")
+        return arr
+
+    def string(self, key: str, choices=None, default=...):
+        value = self.raw(key, default)
+        if not isinstance(value, str):
+            self.fail(key, f"must be a string; got {value!r}.")
+        if choices is not None and value not in choices:
+            self.fail(key, f"must be one of {', '.join(choices)}; got {value!r}.")
+        return value
+
+    def check_unknown(self):
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            self.fail(unknown[0], "unknown key (misspelt?).")
+
+
+_SHAPES = ("sphere", "plane", "box", "fin", "obj")
+
+
+def _geometry(t: _Table, base_dir: Path) -> _mesh.Mesh:
+    shape = t.string("shape", _SHAPES)
+    try:
+        if shape == "sphere":
+            m = _mesh.uv_sphere(t.number("radius", 10.0, positive=True),
+                                segments=t.number("segments", 96, integer=True, positive=True),
+                                rings=t.number("rings", 48, integer=True, positive=True))
+        elif shape == "plane":
+            width = t.number("width", 40.0, positive=True)
+            m = _mesh.plane(width, t.number("depth", width, positive=True),
+                            segments=t.number("segments", 1, integer=True, positive=True))
+        elif shape == "box":
+            m = _mesh.box(t.vector("size", 3, (20.0, 20.0, 20.0), positive=True, scalar_ok=True),
+                          segments=t.number("segments", 8, integer=True, positive=True))
+        elif shape == "fin":
+            m = _mesh.fin(t.number("height", 30.0, positive=True), t.number("radius", 40.0, positive=True),
+                          t.number("thickness", 2.0, positive=True),
+                          arc_degrees=t.number("arc_degrees", 60.0, positive=True),
+                          segments=t.number("segments", 32, integer=True, positive=True))
+        else:
+            path = Path(t.string("path"))
+            m = _mesh.load_obj(path if path.is_absolute() else base_dir / path)
+    except ValueError as error:
+        if isinstance(error, SceneError):
+            raise
+        t.fail("shape", str(error))
+    scale = t.number("scale", 1.0, positive=True)
+    translate = t.vector("translate", 3, (0.0, 0.0, 0.0))
+    t.check_unknown()
+    if scale != 1.0 or np.any(translate != 0):
+        m = m.transformed(scale=scale, translate=translate)
+    return m
+
+
+def _medium(t: _Table, prefix: str = "") -> Medium:
+    sigma_a = t.vector("sigma_a", 3, nonnegative=True, scalar_ok=True)
+    sigma_s = t.vector("sigma_s_prime", 3, nonnegative=True, scalar_ok=True)
+    eta = t.vector("eta", 3, (1.3, 1.3, 1.3), positive=True, scalar_ok=True)
+    if np.any(sigma_a + sigma_s <= 0):
+        t.fail("sigma_s_prime", "sigma_a + sigma_s_prime must be > 0 in every channel (no medium otherwise).")
+    return Medium(sigma_a, sigma_s, eta)
+
+
+def _material(t: _Table, source: str) -> Material:
+    surface = dict(specular=t.number("specular", 1.0, nonnegative=True),
+                   roughness=t.number("roughness", 0.35, positive=True))
+    forms = [k for k in ("name", "sigma_a", "preset", "layers", "gaussians") if t.has(k)]
+    if len(forms) != 1:
+        t.fail("name", "give exactly one of name, sigma_a/sigma_s_prime/eta, preset, layers or gaussians; "
+                       f"got {forms or 'none'}.")
+    form = forms[0]
+    if form == "name":
+        name = t.string("name")
+        if name.lower() not in [n.lower() for n in jensen2001_names()]:
+            t.fail("name", f"unknown Jensen 2001 material {name!r}; one of {', '.join(jensen2001_names())}.")
+        medium = jensen2001(name)
+        material = Material(name, np.asarray(medium.eta), medium=medium, **surface)
+    elif form == "sigma_a":
+        medium = _medium(t)
+        material = Material("custom", np.asarray(medium.eta), medium=medium, **surface)
+    elif form == "preset":
+        t.string("preset", ("skin",))
+        layers, base = _layers.skin_three_layer()
+        material = Material("skin (3 layers)", np.asarray(layers[0].medium.eta), layers=tuple(layers), base=base,
+                            **surface)
+    elif form == "layers":
+        entries = t.raw("layers")
+        if not isinstance(entries, list) or not entries:
+            t.fail("layers", "must be a non-empty array of tables ([[material.layers]]).")
+        layers = []
+        for i, entry in enumerate(entries):
+            lt = _Table(entry, f"material.layers[{i}]", source)
+            layers.append(_layers.Layer(_medium(lt), lt.number("thickness", positive=True)))
+            lt.check_unknown()
+        base = None
+        if t.has("base"):
+            bt = _Table(t.raw("base"), "material.base", source)
+            base = _medium(bt)
+            bt.check_unknown()
+        material = Material(f"{len(layers)} layers" + (" on a base" if base is not None else ""),
+                            np.asarray(layers[0].medium.eta), layers=tuple(layers), base=base, **surface)
+    else:
+        gt = _Table(t.raw("gaussians"), "material.gaussians", source)
+        variances = np.asarray(gt.raw("variances"), float)
+        weights = np.asarray(gt.raw("weights"), float)
+        if variances.ndim != 1 or np.any(variances <= 0) or np.any(np.diff(variances) <= 0):
+            gt.fail("variances", f"must be positive and increasing [mm^2]; got {variances.tolist()}.")
+        if weights.shape != (len(variances), 3) or np.any(weights < 0):
+            gt.fail("weights", f"must be {len(variances)} non-negative [r, g, b] rows; got shape {weights.shape}.")
+        eta = gt.vector("eta", 3, (1.3, 1.3, 1.3), positive=True, scalar_ok=True)
+        gt.check_unknown()
+        material = Material("given Gaussians", eta, gaussians=GaussianSum(weights, variances), **surface)
+    t.check_unknown()
+    return material
+
+
+def _light(t: _Table) -> Light:
+    kind = t.string("type", ("point", "directional"))
+    color = tuple(t.vector("color", 3, (1.0, 1.0, 1.0), nonnegative=True))
+    intensity = t.number("intensity", 1.0, nonnegative=True)
+    if kind == "point":
+        light = Light("point", color, intensity, position=tuple(t.vector("position", 3)))
+    else:
+        direction = t.vector("direction", 3)
+        if np.linalg.norm(direction) == 0:
+            t.fail("direction", "must not be the zero vector.")
+        light = Light("directional", color, intensity, direction=tuple(direction))
+    t.check_unknown()
+    return light
+
+
+def _camera(t: _Table) -> PerspectiveView:
+    position = t.vector("position", 3)
+    look_at = t.vector("look_at", 3, (0.0, 0.0, 0.0))
+    if np.allclose(position, look_at):
+        t.fail("look_at", "must differ from position.")
+    fov = t.number("fov", 30.0, positive=True)
+    if fov >= 180:
+        t.fail("fov", f"must be below 180 degrees; got {fov}.")
+    resolution = t.vector("resolution", 2, (320, 240), positive=True)
+    if np.any(resolution != np.round(resolution)):
+        t.fail("resolution", f"must be two integers; got {resolution.tolist()}.")
+    up = t.vector("up", 3, (0.0, 0.0, 1.0))
+    t.check_unknown()
+    return PerspectiveView(tuple(position), tuple(look_at), fov, int(resolution[0]), int(resolution[1]), tuple(up))
+
+
+def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".") -> Scene:
+    """Build a :class:`Scene` from a TOML-shaped dict (see the module docstring)."""
+    root = _Table(data, "scene", source)
+    mesh = _geometry(_Table(root.raw("geometry"), "geometry", source), Path(base_dir))
+    material = _material(_Table(root.raw("material"), "material", source), source)
+    entries = root.raw("lights")
+    if not isinstance(entries, list) or not entries:
+        root.fail("lights", "must be a non-empty array of tables ([[lights]]).")
+    lights = tuple(_light(_Table(e, f"lights[{i}]", source)) for i, e in enumerate(entries))
+    camera = _camera(_Table(root.raw("camera"), "camera", source))
+    r = _Table(root.raw("render", {}), "render", source)
+    accuracy = r.number("accuracy", 0.05, positive=True)
+    if accuracy >= 1:
+        r.fail("accuracy", f"is a relative error and must lie in (0, 1); got {accuracy}.")
+    texture_size = r.number("texture_size", 512, integer=True, positive=True)
+    if texture_size < 16 or texture_size > 8192:
+        r.fail("texture_size", f"must lie in [16, 8192]; got {texture_size}.")
+    shadow = r.number("shadow_map_size", 512, integer=True, positive=True)
+    exposure = r.number("exposure", None, positive=True)
+    r.check_unknown()
+    root.check_unknown()
+    return Scene(mesh, material, lights, camera, accuracy, texture_size, shadow, exposure, source)
+
+
+def load_scene(path) -> Scene:
+    """Read a TOML scene file; relative OBJ paths are resolved next to it."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise SceneError(f"{path}: no such scene file.") from None
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"{path}: not valid TOML ({error}).") from None
+    return parse_scene(data, source=str(path), base_dir=path.parent)

@@ -1,0 +1,86 @@
+r"""The camera pass: diffused textures and a specular lobe turned into radiance, then tone mapping.
+
+Exitance :math:`M` [W/mm^2] leaving the surface is spread over outgoing directions by the
+exit Fresnel transmittance, normalised so that all of :math:`M` leaves:
+
+.. math:: L_d = \frac{F_t(\cos\theta_o, \eta)}{\pi\,(1 - F_{dr}(\eta))}\,M,
+          \qquad \int_{2\pi} \frac{F_t(\cos\theta, \eta)}{\pi(1 - F_{dr})}\cos\theta\,d\omega = 1.
+
+(Jensen's :math:`S_d = F_t R_d F_t / \pi` leaves out the normalisation and loses the
+fraction :math:`F_{dr}` a second time, though the dipole's boundary condition has
+already counted it.) The specular lobe is a microfacet BRDF with the Beckmann
+distribution and exact dielectric Fresnel reflectance, as d'Eon uses for skin.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..fresnel import diffuse_fresnel_reflectance, fresnel_reflectance, fresnel_transmittance
+
+__all__ = ["diffuse_radiance", "specular_radiance", "tone_map"]
+
+
+def diffuse_radiance(exitance, cos_view, eta):
+    """Radiance [W/(mm^2 sr)] of exitance ``exitance`` (..., C) seen at ``cos_view`` (...)."""
+    cos = jnp.clip(cos_view, 0.0, 1.0)[..., None]
+    norm = jnp.pi * (1 - diffuse_fresnel_reflectance(eta))
+    return exitance * fresnel_transmittance(cos, eta) / norm
+
+
+def specular_radiance(normals, view_dirs, lights, light_geometry, radiant, eta, *, roughness, weight):
+    """Sum over lights of a Beckmann microfacet lobe (Cook-Torrance), (..., C).
+
+    Parameters
+    ----------
+    normals, view_dirs : array (..., 3)
+        Unit normal and unit direction from the surface to the eye.
+    lights : list of Light; light_geometry : list of LightGeometry (per pixel)
+    radiant : array (L, C)
+    eta : array (C,)
+    roughness : float, Beckmann slope RMS m
+    weight : float, scales the lobe (1 = physically based)
+    """
+    n = jnp.asarray(normals, radiant.dtype)
+    v = jnp.asarray(view_dirs, radiant.dtype)
+    cos_o = jnp.clip((n * v).sum(-1), 1e-4, 1.0)
+    total = 0.0
+    for i, (light, g) in enumerate(zip(lights, light_geometry)):
+        to_light = _to_light(light, g, n)
+        cos_i = jnp.clip((n * to_light).sum(-1), 0.0, 1.0)
+        h = to_light + v
+        h = h / jnp.maximum(jnp.linalg.norm(h, axis=-1, keepdims=True), 1e-9)
+        cos_h = jnp.clip((n * h).sum(-1), 1e-4, 1.0)
+        tan2 = (1 - cos_h**2) / cos_h**2
+        m2 = roughness**2
+        D = jnp.exp(-tan2 / m2) / (jnp.pi * m2 * cos_h**4)
+        vh = jnp.clip((v * h).sum(-1), 1e-4, 1.0)
+        G = jnp.minimum(1.0, jnp.minimum(2 * cos_h * cos_o / vh, 2 * cos_h * cos_i / vh))
+        F = fresnel_reflectance(vh[..., None], eta)
+        brdf = F * (D * G / (4 * cos_o))[..., None]  # times cos_i below cancels its own
+        irr = (jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None] * radiant[i]
+        total = total + weight * brdf * irr * (cos_i > 0)[..., None]
+    return total
+
+
+def _to_light(light, g, normals):
+    if light.kind == "directional":
+        d = -np.asarray(light.direction, float) / np.linalg.norm(light.direction)
+        return jnp.broadcast_to(jnp.asarray(d, normals.dtype), normals.shape)
+    return jnp.asarray(g.to_light, normals.dtype)
+
+
+def tone_map(radiance, *, exposure=None, percentile: float = 99.0):
+    """Linear radiance to display sRGB in [0, 1] (NumPy; not on the differentiable path).
+
+    ``exposure`` scales radiance before the sRGB curve; by default it maps the given
+    percentile of the non-zero pixels' brightest channel to 1.
+    """
+    x = np.asarray(radiance, float)
+    if exposure is None:
+        peak = x.max(-1)
+        lit = peak[peak > 0]
+        exposure = 1.0 / np.percentile(lit, percentile) if lit.size else 1.0
+    x = np.clip(x * exposure, 0, 1)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055), float(exposure)
