@@ -28,6 +28,7 @@ from __future__ import annotations
 import functools
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -95,7 +96,7 @@ def _blur_pass(texture, mask, spacing, axis: int, taps: int, wrap: bool):
     stacked = jnp.concatenate([texture * mask[..., None], mask[..., None]], axis=-1)
     total = 0.0
     for k, w in zip(offsets, weights):
-        total = total + w * _lerp_along(stacked, base + k * spacing, axis, wrap)
+        total = total + float(w) * _lerp_along(stacked, base + float(k) * spacing, axis, wrap)
     numerator, weight = total[..., :-1], total[..., -1:]
     has = weight > 1e-12
     return jnp.where(has, numerator / jnp.where(has, weight, 1.0), 0.0) * mask[..., None]
@@ -177,17 +178,19 @@ def hierarchical_blur(texture, mask, stretch, variances, schedule: BlurSchedule,
                       wrap_u: bool = False):
     """Textures blurred to each of ``variances`` [mm^2], each from the one before.
 
+    The steps run under one ``lax.scan`` (one compiled step, whatever the chain length).
+
     Returns
     -------
     array, shape (n, H, W, C)
     """
     targets, outputs = _targets(variances, schedule)
-    done = 0.0
-    current = texture
-    results = []
-    for t, target in enumerate(targets):
-        current = blur_step(current, mask, stretch, target - done, taps=taps, wrap_u=wrap_u)
-        done = target
-        if t in outputs:
-            results.append(current)
-    return jnp.stack(results)
+    targets = jnp.stack([jnp.asarray(t, texture.dtype) for t in targets])
+    steps = jnp.diff(targets, prepend=jnp.zeros((1,), texture.dtype))
+
+    def step(current, delta):
+        blurred = blur_step(current, mask, stretch, delta, taps=taps, wrap_u=wrap_u)
+        return blurred, blurred
+
+    _, every = jax.lax.scan(step, texture, steps)
+    return every[jnp.asarray(outputs)]

@@ -83,17 +83,21 @@ def shadow_map(mesh: Mesh, light: Light, *, size: int = 512) -> ShadowMap:
     """Rasterize ``mesh`` from ``light``: an orthographic map for directional lights, a perspective one for points."""
     lo, hi = mesh.bounds
     center = (lo + hi) / 2
-    radius = float(np.linalg.norm(hi - lo) / 2) * 1.02
+    radius = float(np.linalg.norm(hi - lo) / 2) * 1.02  # orthographic maps cover the bounding sphere
     if light.kind == "directional":
         view = OrthographicView(tuple(light.direction), tuple(center), 2 * radius, size)
         perspective = False
     else:
-        distance = float(np.linalg.norm(np.asarray(light.position) - center))
-        if distance <= radius:
-            raise ValueError(f"point light at {light.position} lies inside the object's bounds "
-                             f"(centre {center.round(3).tolist()}, radius {radius:.3g} mm); move it out.")
-        fov = 2 * np.degrees(np.arcsin(radius / distance))
-        view = PerspectiveView(tuple(light.position), tuple(center), fov, size, size)
+        position = np.asarray(light.position, float)
+        axis = center - position
+        rel = mesh.vertices - position
+        cos = rel @ axis / np.maximum(np.linalg.norm(rel, axis=1) * np.linalg.norm(axis), 1e-300)
+        half_angle = np.degrees(np.arccos(np.clip(cos.min(), -1, 1)))
+        if np.linalg.norm(axis) == 0 or half_angle > 80:
+            raise ValueError(f"point light at {np.round(position, 3).tolist()} sees the object over more than "
+                             f"160 degrees (half angle {half_angle:.0f}); one shadow map cannot cover it -- "
+                             "move the light further out.")
+        view = PerspectiveView(tuple(position), tuple(center), min(2 * half_angle * 1.05 + 1, 170), size, size)
         perspective = True
     xy, depth = view.project(mesh.vertices)
     raster = rasterize(xy, depth, mesh.faces, (size, size), perspective=perspective)

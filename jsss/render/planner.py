@@ -14,8 +14,9 @@ accuracy target:
   15 %, quadruple it (d'Eon's choice) otherwise: on a delta the doubling chain is within
   0.2 % of the analytic Gaussian, the quadrupling one 13-19 % (tests, benchmark);
 * **stretch correction** -- off when the UV map's stretch varies by less than 10 %;
-* **translucent shadow maps** -- off when even the thinnest shadowed part passes less
-  than a tenth of the target of the profile's light (:math:`e^{-d^2/2v}` weighting);
+* **translucent shadow maps** -- off when no light crosses between opposite faces (normals
+  more than 120 degrees apart), or when the thinnest such part passes
+  less than a tenth of the target of the profile's light (:math:`e^{-d^2/2v}` weighting);
 * **layered profile** -- only for layered materials; **specular** -- when the material has one.
 """
 
@@ -147,19 +148,28 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None) -> Plan:
 
 
 def _tsm_decision(scene: Scene, variances, weights, target):
-    """Thinnest shadowed part and the share of the profile's light that crosses it."""
+    """Thinnest part that light cuts through, from one face to an opposite one.
+
+    Where light enters on a face turned the same way as the shadowed point (any shadowed
+    point near the terminator of a convex body) the texture-space blur already carries
+    that light around the surface; translucent shadow maps add light that crosses from a
+    face to one turned away from it (normals more than 120 degrees apart): an ear, a fin,
+    the far side of a ball.
+    """
     texels = bake_texels(scene.mesh, 64)
     thinnest = np.inf
     for light in scene.lights:
         shadow = shadow_map(scene.mesh, light, size=128)
         g = light_geometry(texels.position, texels.normal, texels.mask, light, shadow)
-        behind = g.behind > 0
-        if behind.any():
-            thinnest = min(thinnest, float(np.percentile(g.thickness[behind], 2)))
+        index = np.clip((g.front_uv * texels.size).astype(int), 0, texels.size - 1)
+        front_normal = texels.normal[index[..., 1], index[..., 0]]
+        through = (g.behind > 0) & ((front_normal * texels.normal).sum(-1) < -0.5)
+        if through.any():
+            thinnest = min(thinnest, float(np.percentile(g.thickness[through], 2)))
     if not np.isfinite(thinnest):
-        return False, "no point is shadowed by the object itself"
+        return False, "no light crosses between opposite faces"
     w = np.abs(weights)
     share = float(np.max((w * np.exp(-thinnest**2 / (2 * variances))[:, None]).sum(0) / np.maximum(w.sum(0), 1e-300)))
     on = share >= 0.1 * target
-    return on, (f"thinnest shadowed part {thinnest:.3g} mm passes {share:.2e} of the profile's light "
+    return on, (f"thinnest part light cuts through: {thinnest:.3g} mm, passing {share:.2e} of the profile's light "
                 f"({'>=' if on else '<'} {0.1 * target:.2g})")

@@ -76,6 +76,8 @@ def _reference(material: Material, r, medium=None):
         m = material.medium if medium is None else medium
         return dipole.profile(m, r), dipole.total_reflectance(m)
     profile = jnp.asarray(exact_profile(material, r), r.dtype)
+    if material.gaussians is not None:
+        return profile, jnp.asarray(material.gaussians.weights, r.dtype).sum(0)
     return profile, jnp.trapezoid(2 * jnp.pi * r[:, None] * profile, r, axis=0)
 
 
@@ -134,7 +136,7 @@ def reduction_error(material: Material, variances, *, radii=None, reference=None
 def choose_variances(material: Material, target: float, *, max_terms: int = 12):
     """The fewest shared variances whose profile error is at most ``target``.
 
-    Tries ``n = 1 .. max_terms`` geometric grids whose narrow end is the narrowest
+    A material given as Gaussians keeps its own variances. Otherwise tries ``n = 1 .. max_terms`` geometric grids whose narrow end is the narrowest
     significant term, or 10 or 100 times narrower (layered materials have sharp cores).
 
     Returns
@@ -142,6 +144,8 @@ def choose_variances(material: Material, target: float, *, max_terms: int = 12):
     variances : ndarray; error : float (worst channel); reached : bool
     """
     full = full_profile(material)
+    if material.gaussians is not None:  # the profile is given: use its own variances
+        return np.asarray(full.variances), 0.0, True
     r = _radii(full)
     reference = tuple(np.asarray(a, float) for a in _reference(material, jnp.asarray(r)))
     best = None

@@ -1,0 +1,103 @@
+"""Scene files: what they may say, and errors that name the key; meshes; the jsss-render command."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from jsss.render import SceneError, load_obj, load_scene, parse_scene
+from jsss.render.mesh import box, fin, plane, uv_sphere
+from jsss.render.texture_space import bake_texels
+from tests.jsss.render.scenes import scene_dict
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d["material"].update(name="jade"), r"\[material\] name: unknown Jensen 2001 material 'jade'"),
+    (lambda d: d.update(material={"sigma_a": [-0.1, 0, 0], "sigma_s_prime": 1.0}), r"sigma_a: must be >= 0"),
+    (lambda d: d.update(material={"sigma_a": 0.1, "sigma_s_prime": 1.0, "eta": 0.0}), r"eta: must be > 0"),
+    (lambda d: d["geometry"].update(radius=-1), r"\[geometry\] radius: must be > 0"),
+    (lambda d: d["geometry"].update(shape="torus"), r"shape: must be one of"),
+    (lambda d: d["camera"].update(fov=200), r"\[camera\] fov"),
+    (lambda d: d.update(lights=[]), r"lights: must be a non-empty array"),
+    (lambda d: d["lights"][0].update(colour=[1, 1, 1]), r"\[lights\[0\]\] colour: unknown key"),
+    (lambda d: d["render"].update(accuracy=2.0), r"\[render\] accuracy"),
+    (lambda d: d.pop("camera"), r"\[scene\] camera: missing"),
+    (lambda d: d["material"].update(sigma_a=[0.1] * 3), r"give exactly one of"),
+])
+def test_bad_scenes_name_the_key_and_the_problem(change, message):
+    data = scene_dict()
+    change(data)
+    with pytest.raises(SceneError, match=message):
+        parse_scene(data, source="s.toml")
+
+
+def test_unreadable_toml_names_the_file(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text("[geometry\nshape = 1")
+    with pytest.raises(SceneError, match="broken.toml: not valid TOML"):
+        load_scene(path)
+    with pytest.raises(SceneError, match="no such scene file"):
+        load_scene(tmp_path / "missing.toml")
+
+
+def test_example_scenes_load():
+    for name in ("marble_sphere", "skin_backlit", "ketchup_plane"):
+        scene = load_scene(os.path.join(ROOT, "examples", f"{name}.toml"))
+        assert scene.lights and scene.camera.width > 0
+
+
+@pytest.mark.parametrize("mesh", [uv_sphere(10.0), plane(20.0), box(10.0), fin(20.0, 30.0, 1.0)])
+def test_texel_area_sums_to_the_surface_area(mesh):
+    p = mesh.vertices[mesh.faces]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
+    texels = bake_texels(mesh, 256)
+    assert texels.area.sum() == pytest.approx(area, rel=0.03)
+    assert np.allclose(np.linalg.norm(texels.normal[texels.mask], axis=-1), 1.0)
+
+
+def test_obj_with_uvs_loads_and_without_uvs_is_refused(tmp_path):
+    good = tmp_path / "quad.obj"
+    good.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                    "vn 0 0 1\nf 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n")
+    mesh = load_obj(good)
+    assert len(mesh.faces) == 2 and mesh.uvs.min() >= 0 and mesh.uvs.max() <= 1
+    bad = tmp_path / "nouv.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n")
+    with pytest.raises(ValueError, match="nouv.obj: the mesh has no per-vertex texture coordinates"):
+        load_obj(bad)
+
+
+def _run(*args, cwd):
+    env = dict(os.environ, CI="true")
+    return subprocess.run([sys.executable, "-m", "jsss.render.cli", *args], capture_output=True, text=True,
+                          cwd=cwd, env=env, stdin=subprocess.DEVNULL, timeout=600)
+
+
+def test_command_line_renders_png_and_exr_and_prints_the_plan(tmp_path):
+    scene = tmp_path / "small.toml"
+    scene.write_text('[geometry]\nshape = "sphere"\nradius = 15\nsegments = 32\nrings = 16\n'
+                     '[material]\nname = "marble"\n[[lights]]\ntype = "directional"\ndirection = [0.5, 1, -0.5]\n'
+                     '[camera]\nposition = [0, -90, 20]\nresolution = [40, 30]\n[render]\ntexture_size = 64\n')
+    out = _run(str(scene), "-o", str(tmp_path / "out.png"), "--plan", "--timings", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "plan:" in out.stdout and "diffusion" in out.stdout and "timings (ms)" in out.stdout
+    import matplotlib.image
+
+    from jsss.exr import read_exr
+
+    png = matplotlib.image.imread(tmp_path / "out.png")
+    assert png.shape[:2] == (30, 40)
+    exr = read_exr(tmp_path / "out.exr")
+    assert exr.pixels.shape == (30, 40, 3) and np.all(np.isfinite(exr.pixels)) and exr.pixels.max() > 0
+
+
+def test_command_line_bad_scene_is_one_line_and_exit_2(tmp_path):
+    scene = tmp_path / "bad.toml"
+    scene.write_text('[geometry]\nshape = "sphere"\nradius = -3\n')
+    out = _run(str(scene), cwd=tmp_path)
+    assert out.returncode == 2
+    assert out.stderr.strip().count("\n") == 0 and "radius: must be > 0" in out.stderr
