@@ -71,7 +71,12 @@ def spacing_for_variance(variance, *, taps: int = 7, max_spacing: int = 1024):
 
 
 def _lerp_along(values, positions, axis: int, wrap: bool):
-    """Linear interpolation of ``values`` (H, W, C) at fractional ``positions`` (H, W) along ``axis``."""
+    """Linear interpolation of ``values`` (H, W, C) at fractional ``positions`` (H, W) along ``axis``.
+
+    Reads are one flat row gather each (``take_along_axis`` here compiles to a gather per
+    channel and slice, an order of magnitude slower on CPU).
+    """
+    H, W, C = values.shape
     n = values.shape[axis]
     i0 = jnp.floor(positions)
     f = (positions - i0)[..., None]
@@ -84,8 +89,13 @@ def _lerp_along(values, positions, axis: int, wrap: bool):
         inside0 = ((i0 >= 0) & (i0 < n))[..., None].astype(values.dtype)
         inside1 = ((i1 >= 0) & (i1 < n))[..., None].astype(values.dtype)
         i0, i1 = jnp.clip(i0, 0, n - 1), jnp.clip(i1, 0, n - 1)
-    v0 = jnp.take_along_axis(values, i0[..., None], axis=axis)
-    v1 = jnp.take_along_axis(values, i1[..., None], axis=axis)
+    flat = values.reshape(H * W, C)
+    if axis == 1:
+        rows = jnp.arange(H, dtype=jnp.int32)[:, None] * W
+        v0, v1 = flat[rows + i0], flat[rows + i1]
+    else:
+        cols = jnp.arange(W, dtype=jnp.int32)[None, :]
+        v0, v1 = flat[i0 * W + cols], flat[i1 * W + cols]
     return (1 - f) * v0 * inside0 + f * v1 * inside1
 
 
@@ -120,8 +130,11 @@ def blur_step(texture, mask, stretch, variance, *, taps: int = 7, wrap_u: bool =
     safe = jnp.where(stretch > 0, stretch, 1.0)
     size = max(texture.shape[:2])
     spacing = spacing_for_variance(variance / safe**2, taps=taps, max_spacing=size)
-    spacing = jnp.where(stretch > 0, spacing, 0.0)
+    # Materialise the spacing: otherwise XLA fuses the table search into every tap's gather.
+    spacing = jax.lax.optimization_barrier(jnp.where(stretch > 0, spacing, 0.0))
     out = _blur_pass(texture, mask, spacing[..., 0], 1, taps, wrap_u)
+    # ... and the first pass's result, which XLA would otherwise recompute inside each gather of the second.
+    out = jax.lax.optimization_barrier(out)
     return _blur_pass(out, mask, spacing[..., 1], 0, taps, False)
 
 
