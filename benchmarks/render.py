@@ -16,6 +16,7 @@ Run: python benchmarks/render.py [--quick]
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 
@@ -28,7 +29,7 @@ from scipy.ndimage import gaussian_filter  # noqa: E402
 from scipy.signal import fftconvolve  # noqa: E402
 
 from jsss import dipole  # noqa: E402
-from jsss.render import Plan, parse_scene, plan_scene, prepare, render_params  # noqa: E402
+from jsss.render import parse_scene, plan_scene, prepare, render_params  # noqa: E402
 from jsss.render.blur import blur_schedule, hierarchical_blur  # noqa: E402
 from jsss.render.profiles import choose_variances, shared_variances, full_profile  # noqa: E402
 from jsss.render.renderer import diffusion_pass, exitance_pass, irradiance_pass  # noqa: E402
@@ -47,11 +48,10 @@ def plane_scene(name, size):
 
 
 def with_knobs(plan, *, variances=None, size=None, ratio=None, stretch=None):
-    decisions = plan.decisions
     if stretch is not None:
-        decisions = plan.replace("stretch correction", stretch, "benchmark").decisions
-    return Plan(decisions, plan.variances if variances is None else variances, plan.profile_error,
-                size or plan.texture_size, plan.taps, ratio or plan.max_ratio, plan.pixel_size)
+        plan = plan.replace("stretch correction", stretch, "benchmark")
+    return dataclasses.replace(plan, variances=plan.variances if variances is None else variances,
+                               texture_size=size or plan.texture_size, max_ratio=ratio or plan.max_ratio)
 
 
 def texel_kernel(medium, texel, half):
@@ -90,7 +90,7 @@ def plane_table(quick):
             for n in counts:
                 variances = shared_variances(full, n) if n != len(base.variances) else base.variances
                 if n != len(base.variances):
-                    variances, _, _ = choose_variances(scene.material, 0.0, max_terms=n)
+                    variances = np.asarray(choose_variances(scene.material, 0.0, max_terms=n)[0].variances)
                 for ratio in ((2.0, 4.0) if n == len(base.variances) else (2.0,)):
                     plan = with_knobs(base, variances=variances, ratio=ratio)
                     prep_n = prepare(scene, plan)

@@ -22,12 +22,13 @@ accuracy target:
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from .lighting import light_geometry, shadow_map
-from .profiles import choose_variances, render_profile
+from .profiles import choose_variances
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
 
@@ -74,8 +75,7 @@ class Plan:
 
     def replace(self, name: str, on: bool, why: str) -> "Plan":
         decisions = tuple(PassDecision(d.name, on, why) if d.name == name else d for d in self.decisions)
-        return Plan(decisions, self.variances, self.profile_error, self.texture_size, self.taps,
-                    self.max_ratio, self.pixel_size)
+        return dataclasses.replace(self, decisions=decisions)
 
     def describe(self) -> str:
         width = max(len(d.name) for d in self.decisions)
@@ -107,10 +107,9 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None) -> Plan:
                  "irradiance": (True, f"{len(scene.lights)} light(s) with Fresnel transmittance"),
                  "shadows": (True, "shadow map per light"),
                  "camera": (True, "rasterize, look up, tone map")}
-    variances, error, reached = choose_variances(material, target / 2)
+    gs, error, reached = choose_variances(material, target / 2)
+    variances, w = np.asarray(gs.variances), np.asarray(gs.weights)
     pixel = _pixel_footprint(scene)
-    gs = render_profile(material, variances)
-    w = np.asarray(gs.weights)
     total = w.sum(0)
     rms = float(np.max(np.sqrt(np.maximum((2 * variances[:, None] * w).sum(0), 0) / np.maximum(total, 1e-300))))
     diffusion = rms >= pixel
@@ -138,11 +137,10 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None) -> Plan:
     spec = material.specular > 0
     decisions["specular"] = (spec, f"Beckmann m = {material.roughness:g}, weight {material.specular:g}"
                              if spec else "material specular = 0")
-    why_n = "" if reached else " (target not reachable with 12; best shown)"
     if not reached:
-        decisions["layered profile" if material.layers else "diffusion"] = (
-            decisions["layered profile" if material.layers else "diffusion"][0],
-            decisions["layered profile" if material.layers else "diffusion"][1] + why_n)
+        profile_pass = "layered profile" if material.layers else "diffusion"
+        on, why = decisions[profile_pass]
+        decisions[profile_pass] = (on, why + " (target not reachable with 12 Gaussians; best shown)")
     ordered = tuple(PassDecision(name, *decisions[name]) for name in PASS_ORDER)
     return Plan(ordered, variances, error, size, 7, 2.0 if target < 0.15 else 4.0, pixel)
 

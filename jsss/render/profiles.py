@@ -118,6 +118,15 @@ def render_profile(material: Material, variances, *, radii=None, medium=None) ->
     return GaussianSum(weights, v)
 
 
+def _numpy_fit(variances, r, reference):
+    """Weights on ``variances`` and their per-channel relative RMS error, in NumPy float64."""
+    profile, total = (np.asarray(a, float) for a in reference)
+    weights, _, basis = _fit_weights(variances, r, profile, total, xp=np)
+    residual = profile - basis @ weights
+    num = np.trapezoid(r[:, None] * residual**2, r, axis=0)
+    return weights, np.sqrt(num / np.trapezoid(r[:, None] * profile**2, r, axis=0))
+
+
 def reduction_error(material: Material, variances, *, radii=None, reference=None) -> np.ndarray:
     """d'Eon's relative RMS error (eq. 10) of the render profile against the exact one, per channel.
 
@@ -125,37 +134,40 @@ def reduction_error(material: Material, variances, *, radii=None, reference=None
     passed to reuse them. Computed in NumPy float64.
     """
     r = np.asarray(_radii(full_profile(material)) if radii is None else radii, float)
-    profile, total = _reference(material, jnp.asarray(r)) if reference is None else reference
-    profile, total = np.asarray(profile, float), np.asarray(total, float)
-    weights, _, basis = _fit_weights(variances, r, profile, total, xp=np)
-    residual = profile - basis @ weights
-    num = np.trapezoid(r[:, None] * residual**2, r, axis=0)
-    return np.sqrt(num / np.trapezoid(r[:, None] * profile**2, r, axis=0))
+    reference = _reference(material, jnp.asarray(r)) if reference is None else reference
+    return _numpy_fit(variances, r, reference)[1]
 
 
 def choose_variances(material: Material, target: float, *, max_terms: int = 12):
     """The fewest shared variances whose profile error is at most ``target``.
 
-    A material given as Gaussians keeps its own variances. Otherwise tries ``n = 1 .. max_terms`` geometric grids whose narrow end is the narrowest
-    significant term, or 10 or 100 times narrower (layered materials have sharp cores).
+    A material given as Gaussians keeps its own variances. Otherwise tries
+    ``n = 1 .. max_terms`` geometric grids whose narrow end is the narrowest significant
+    term, or 10 or 100 times narrower (layered materials have sharp cores).
 
     Returns
     -------
-    variances : ndarray; error : float (worst channel); reached : bool
+    profile : GaussianSum
+        The render profile on the chosen variances (weights (n, 3), NumPy float64), as
+        :func:`render_profile` would fit it.
+    error : float (worst channel); reached : bool
     """
     full = full_profile(material)
-    if material.gaussians is not None:  # the profile is given: use its own variances
-        return np.asarray(full.variances), 0.0, True
     r = _radii(full)
     reference = tuple(np.asarray(a, float) for a in _reference(material, jnp.asarray(r)))
+    if material.gaussians is not None:  # the profile is given: use its own variances
+        grid = np.asarray(full.variances)
+        weights, _ = _numpy_fit(grid, r, reference)
+        return GaussianSum(weights, grid), 0.0, True
     best = None
     for n in range(1, max_terms + 1):
         base = shared_variances(full, n)
         grids = [base] if n == 1 else [np.geomspace(base[0] * f, base[-1], n) for f in (1.0, 0.1, 0.01)]
         for grid in grids:
-            error = float(np.max(reduction_error(material, grid, radii=r, reference=reference)))
-            if np.isfinite(error) and (best is None or error < best[1]):
-                best = (grid, error)
-        if best[1] <= target:
-            return best[0], best[1], True
-    return best[0], best[1], False
+            weights, errors = _numpy_fit(grid, r, reference)
+            error = float(np.max(errors))
+            if np.isfinite(error) and (best is None or error < best[2]):
+                best = (grid, weights, error)
+        if best[2] <= target:
+            return GaussianSum(best[1], best[0]), best[2], True
+    return GaussianSum(best[1], best[0]), best[2], False

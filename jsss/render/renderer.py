@@ -69,7 +69,6 @@ class Prepared:
     pixel_lights: tuple
     stretch: np.ndarray
     schedule: object
-    lights: tuple
 
 
 def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepared:
@@ -105,7 +104,7 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
         stretch = np.where(texels.mask[..., None], texels.median_stretch(), 0.0)
     schedule = blur_schedule(np.asarray(plan.variances), texels.median_stretch(), max_ratio=plan.max_ratio) \
         if plan.on("diffusion") else None
-    return Prepared(texels, texel_lights, mask, uv, normal, view, pixel_lights, stretch, schedule, scene.lights)
+    return Prepared(texels, texel_lights, mask, uv, normal, view, pixel_lights, stretch, schedule)
 
 
 def _as(tree, dtype):
@@ -143,7 +142,7 @@ def camera_pass(params: RenderParams, prep: Prepared, plan: Plan, M, roughness: 
     L = diffuse_radiance(exitance, cos_view, params.eta)
     if plan.on("specular"):
         lights = [_as(g, dtype) for g in prep.pixel_lights]
-        L = L + specular_radiance(prep.pixel_normal, prep.pixel_view, prep.lights, lights, params.radiant,
+        L = L + specular_radiance(prep.pixel_normal, prep.pixel_view, lights, params.radiant,
                                   params.eta, roughness=roughness, weight=specular)
     return L * mask[..., None]
 

@@ -29,14 +29,14 @@ def diffuse_radiance(exitance, cos_view, eta):
     return exitance * fresnel_transmittance(cos, eta) / norm
 
 
-def specular_radiance(normals, view_dirs, lights, light_geometry, radiant, eta, *, roughness, weight):
+def specular_radiance(normals, view_dirs, light_geometry, radiant, eta, *, roughness, weight):
     """Sum over lights of a Beckmann microfacet lobe (Cook-Torrance), (..., C).
 
     Parameters
     ----------
     normals, view_dirs : array (..., 3)
         Unit normal and unit direction from the surface to the eye.
-    lights : list of Light; light_geometry : list of LightGeometry (per pixel)
+    light_geometry : list of LightGeometry (per pixel)
     radiant : array (L, C)
     eta : array (C,)
     roughness : float, Beckmann slope RMS m
@@ -46,8 +46,8 @@ def specular_radiance(normals, view_dirs, lights, light_geometry, radiant, eta, 
     v = jnp.asarray(view_dirs, radiant.dtype)
     cos_o = jnp.clip((n * v).sum(-1), 1e-4, 1.0)
     total = 0.0
-    for i, (light, g) in enumerate(zip(lights, light_geometry)):
-        to_light = _to_light(light, g, n)
+    for i, g in enumerate(light_geometry):
+        to_light = jnp.asarray(g.to_light, radiant.dtype)
         cos_i = jnp.clip((n * to_light).sum(-1), 0.0, 1.0)
         h = to_light + v
         h = h / jnp.maximum(jnp.linalg.norm(h, axis=-1, keepdims=True), 1e-9)
@@ -62,13 +62,6 @@ def specular_radiance(normals, view_dirs, lights, light_geometry, radiant, eta, 
         irr = (jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None] * radiant[i]
         total = total + weight * brdf * irr * (cos_i > 0)[..., None]
     return total
-
-
-def _to_light(light, g, normals):
-    if light.kind == "directional":
-        d = -np.asarray(light.direction, float) / np.linalg.norm(light.direction)
-        return jnp.broadcast_to(jnp.asarray(d, normals.dtype), normals.shape)
-    return jnp.asarray(g.to_light, normals.dtype)
 
 
 def tone_map(radiance, *, exposure=None, percentile: float = 99.0):

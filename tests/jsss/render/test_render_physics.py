@@ -1,5 +1,7 @@
 """Rendered light against closed forms: a straight shadow edge, energy, transmission; float32; gradients."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -15,7 +17,7 @@ from tests.jsss.render.scenes import flat_plane, scene_dict
 
 
 def _with_texture(plan: Plan, size: int) -> Plan:
-    return Plan(plan.decisions, plan.variances, plan.profile_error, size, plan.taps, plan.max_ratio, plan.pixel_size)
+    return dataclasses.replace(plan, texture_size=size)
 
 
 def _shadow_edge(material, size):
