@@ -57,8 +57,12 @@ class PerspectiveView:
         """Pixels per unit of tangent."""
         return 0.5 * self.height / np.tan(np.deg2rad(self.fov_degrees) / 2)
 
+    def frame(self):
+        """Unit vectors (right, down, forward): pixel columns, pixel rows and the view axis."""
+        return _basis(np.subtract(self.look_at, self.position), self.up)
+
     def project(self, points):
-        right, down, forward = _basis(np.subtract(self.look_at, self.position), self.up)
+        right, down, forward = self.frame()
         rel = np.asarray(points, float) - np.asarray(self.position, float)
         depth = rel @ forward
         safe = np.where(depth > 1e-9, depth, np.nan)
