@@ -30,13 +30,22 @@ importance samples land, combined with the balance heuristic
 :math:`q = N_{imp}\,q_{imp} + N_{uni}\,q_{uni}`; the sample pattern is a low-discrepancy
 (Kronecker) point set, shifted per pixel from a 4 x 4 tile of offsets (interleaved
 sampling: noise becomes a fine dither). Three colour channels share one set of samples:
-the importance density is the mixture of the three channels' densities.
+the importance density is the mixture of the three channels' densities, each channel
+drawn in proportion to its albedo.
 
 Rejected samples (they count as zero, keeping the estimate unbiased for the visible
 surface): off the image, on background pixels, and across depth discontinuities -- where
 the surface found along the ray lies farther from :math:`p'` than :math:`p'` lies from
 :math:`x` (plus two pixel footprints), the ray has hit another part of the object. Light
 from surfaces the camera does not see is missing (Mertens' "global undershoot").
+
+Where the ray through :math:`p'` meets the surface comes from the depth buffer: :math:`1/z`
+interpolated between the four nearest pixel centres (exact on planes) where they lie on one
+smooth surface, the hit pixel's own depth elsewhere; and within :math:`x`'s own pixel
+:math:`p = p'`. Without that last rule the edge-on tangent plane of a silhouette pixel
+collapses the profile's sharp core onto :math:`x` and the weight
+:math:`R(|x-p|)/q(r')` explodes: on the marble sphere example (128 samples) the error
+against the brute-force reference fell from 22 % to 4.4 % with these two rules.
 """
 
 from __future__ import annotations
@@ -47,17 +56,19 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.integrate import trapezoid as _trapezoid
 
 from .. import dipole
 from ..medium import Medium
 from ..numerics import is_concrete, safe_sqrt
 from ..sampling import sample_dipole_radius
 from .mesh import Mesh
-from .raster import PerspectiveView, rasterize, surface_attributes
+from .raster import PerspectiveView, Raster, rasterize, surface_attributes
 
-__all__ = ["CameraBuffers", "SampledProfile", "camera_buffers", "image_space_exitance", "profile_radius"]
+__all__ = ["CameraBuffers", "SampledProfile", "camera_buffers", "image_space_exitance", "profile_radius", "rms_radius"]
 
 TILE = 4  # interleaved sampling: pixels in a TILE x TILE block use different pattern offsets
+GAP_RATIO = 1.0  # depth discontinuity: the surface lies farther from p' than this times |p' - x|
 GRAZING_COSINE = 0.05  # the Jacobian's cos(alpha) is held above this at silhouettes
 _KRONECKER = 1.0 / 1.2207440846057594753 ** np.arange(1, 4)  # R3 sequence (Roberts 2018)
 
@@ -68,11 +79,17 @@ class SampledProfile(eqx.Module):
     Exactly one form: a dipole ``medium`` (shape (C,)), or a Gaussian sum ``weights``
     (n, C) on ``variances`` (n,) [mm^2] (layered or given profiles). A pytree: gradients
     reach the medium or the weights.
+
+    ``channel_weights`` (C,) sets how a dipole's samples are shared among channels; by
+    default in proportion to each channel's albedo (held constant under differentiation:
+    the estimate stays unbiased and its gradient too, but a finite difference of it jumps
+    where a sample changes channel -- fix ``channel_weights`` to compare the two).
     """
 
     medium: Medium | None = None
     weights: jax.Array | None = None
     variances: jax.Array | None = None
+    channel_weights: jax.Array | None = None
 
     def __check_init__(self):
         if (self.medium is None) == (self.weights is None):
@@ -93,6 +110,26 @@ class SampledProfile(eqx.Module):
             return dipole.total_reflectance(self.medium)
         return self.weights.sum(0)
 
+    def transfer(self, omega):
+        """Hankel transform over the total, :math:`\\hat R(\\omega)/\\hat R(0)` (..., C): the blur's
+        gain at spatial frequency ``omega`` [rad/mm] (1 at 0, falling past 1/diffusion length)."""
+        omega = jnp.asarray(omega)
+        if self.medium is not None:
+            return dipole.spectrum(self.medium, omega) / dipole.total_reflectance(self.medium)
+        gains = jnp.exp(-omega[..., None] ** 2 * self.variances / 2) @ self.weights
+        return gains / self.weights.sum(0)
+
+    def _channel_choice(self):
+        """Probability of drawing a dipole sample from each channel: its albedo's share (a
+        floor of a tenth of the brightest keeps dim channels sampled), so the bright
+        channels, which dominate the image's error, get most samples."""
+        if self.channel_weights is not None:
+            w = jnp.asarray(self.channel_weights)
+            return w / w.sum()
+        rho = jax.lax.stop_gradient(jnp.atleast_1d(dipole.total_reflectance(self.medium)))
+        rho = jnp.maximum(rho, 0.1 * rho.max())
+        return rho / rho.sum()
+
     def _mixture(self):
         w = jnp.abs(self.weights).sum(1)
         return w / w.sum()
@@ -100,30 +137,42 @@ class SampledProfile(eqx.Module):
     def density(self, r):
         """Area density [1/mm^2] in the tangent plane of one importance sample at radius ``r``."""
         if self.medium is not None:
-            return jnp.mean(dipole.profile(self.medium, r) / dipole.total_reflectance(self.medium), axis=-1)
+            rho = dipole.total_reflectance(self.medium)
+            return jnp.sum(self._channel_choice() * dipole.profile(self.medium, r) / rho, axis=-1)
         g = jnp.exp(-r[..., None] ** 2 / (2 * self.variances)) / (2 * jnp.pi * self.variances)
         return g @ self._mixture()
 
     def sample(self, u_pick, u_radius):
         """Radii [mm] with :meth:`density` from two uniform numbers each (same shape)."""
         if self.medium is not None:
-            channels = self.medium.shape[-1]
-            pick = jnp.clip(jnp.floor(u_pick * channels), 0, channels - 1)
-            u_pole = u_pick * channels - pick
+            choice = self._channel_choice()
+            upper = jnp.cumsum(choice)
+            pick = jnp.clip(jnp.searchsorted(upper, u_pick, side="right"), 0, len(choice) - 1)
+            u_pole = jnp.clip((u_pick - (upper[pick] - choice[pick])) / choice[pick], 0.0, 1.0)
             radii = sample_dipole_radius(self.medium, u_pole, u_radius)  # (..., C)
-            return jnp.take_along_axis(radii, pick.astype(jnp.int32)[..., None], -1)[..., 0]
+            return jnp.take_along_axis(radii, pick[..., None], -1)[..., 0]
         cdf = jnp.cumsum(self._mixture())
         k = jnp.clip(jnp.searchsorted(cdf, u_pick * cdf[-1]), 0, len(self.variances) - 1)
         eps = jnp.finfo(jnp.result_type(u_radius)).eps
         return jnp.sqrt(-2 * self.variances[k] * jnp.log1p(-jnp.clip(u_radius, 0, 1 - eps)))
 
 
-def profile_radius(profile: SampledProfile, quantile: float = 0.95) -> float:
-    """Radius [mm] holding ``quantile`` of the widest channel's light (NumPy, for knobs)."""
+def _radial_grid(profile: SampledProfile):
     r = np.geomspace(1e-4, 1e4, 4000)
     with jax.ensure_compile_time_eval():  # concrete numbers even when called while tracing
         values = np.asarray(profile(jnp.asarray(r)))  # (N, C)
-    ring = np.abs(values) * r[:, None]
+    return r, np.abs(values) * r[:, None]
+
+
+def rms_radius(profile: SampledProfile) -> float:
+    r"""Root-mean-square radius [mm] of the widest channel, :math:`\sqrt{\int r^2 R\,dA / \int R\,dA}`."""
+    r, ring = _radial_grid(profile)
+    return float(np.sqrt(np.max(_trapezoid(ring * r[:, None] ** 2, r, axis=0) / _trapezoid(ring, r, axis=0))))
+
+
+def profile_radius(profile: SampledProfile, quantile: float = 0.95) -> float:
+    """Radius [mm] holding ``quantile`` of the widest channel's light (NumPy, for knobs)."""
+    r, ring = _radial_grid(profile)
     cumulative = np.concatenate([np.zeros((1, ring.shape[1])),
                                  np.cumsum(0.5 * (ring[1:] + ring[:-1]) * np.diff(r)[:, None], 0)])
     cumulative /= cumulative[-1]
@@ -139,6 +188,7 @@ class CameraBuffers:
     position : (H, W, 3) [mm]; normal : (H, W, 3), turned towards the camera
     depth : (H, W) [mm] along the view axis; mask : (H, W) bool
     eye, right, down, forward : (3,) the camera frame; focal : pixels per unit tangent
+    raster : Raster, the triangle and barycentrics behind each pixel (for more attributes)
     """
 
     position: np.ndarray
@@ -150,6 +200,7 @@ class CameraBuffers:
     down: np.ndarray
     forward: np.ndarray
     focal: float
+    raster: Raster
 
     @property
     def shape(self):
@@ -175,7 +226,7 @@ def camera_buffers(mesh: Mesh, camera: PerspectiveView) -> CameraBuffers:
     eye = np.asarray(camera.position, float)
     depth = np.where(mask, (np.asarray(position) - eye) @ forward, 0.0)
     return CameraBuffers(np.asarray(position, float), np.asarray(normal, float), depth, np.asarray(mask, bool),
-                         eye, right, down, forward, float(camera.focal))
+                         eye, right, down, forward, float(camera.focal), raster)
 
 
 def _tangent_frame(n):
@@ -254,6 +305,23 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
     focal, R = float(buffers.focal), float(disc_radius)
     t, s = _tangent_frame(n)
     cos_x = jnp.sum(n * (eye - x), -1)  # > 0 on visible pixels (normals face the camera)
+    rows, columns = jnp.meshgrid(jnp.arange(H), jnp.arange(W), indexing="ij")
+
+    def _depth_at(col, row, ix, iy):
+        """Depth along the ray: 1/depth interpolated bilinearly between pixel centres (exact
+        on planes, where 1/depth is affine on the screen) where the four centres lie on one
+        smooth surface; the hit pixel's own depth elsewhere (silhouettes, discontinuities)."""
+        fx, fy = col - 0.5, row - 0.5
+        x0 = jnp.clip(jnp.floor(fx).astype(jnp.int32), 0, W - 2)
+        y0 = jnp.clip(jnp.floor(fy).astype(jnp.int32), 0, H - 2)
+        tx, ty = jnp.clip(fx - x0, 0.0, 1.0), jnp.clip(fy - y0, 0.0, 1.0)
+        corners = [(y0, x0), (y0, x0 + 1), (y0 + 1, x0), (y0 + 1, x0 + 1)]
+        z = jnp.stack([depth[a, b] for a, b in corners])
+        ok = jnp.all(jnp.stack([mask[a, b] for a, b in corners]), 0) & (z.max(0) - z.min(0) <= 4 * z.max(0) / focal)
+        inv = 1 / jnp.where(z > 0, z, 1.0)
+        weights = jnp.stack([(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty])
+        smooth = 1 / jnp.sum(weights * inv, 0)
+        return jnp.where(ok, smooth, depth[iy, ix])
 
     def step(total, xs):
         point, is_importance = xs
@@ -272,9 +340,13 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
         hit = mask & inside & mask[iy, ix]
         # The visible surface along the ray through p': the hit pixel's depth on that ray.
         # Misses keep p = p' so that every quantity below stays finite (and so its gradient).
-        p = jnp.where(hit[..., None], eye + rel * (depth[iy, ix] / z_safe)[..., None], p_tangent)
+        # Within x's own pixel the depth buffer knows nothing finer than x itself: keep the
+        # tangent plane there (else an edge-on tangent plane at a silhouette collapses the
+        # profile's core onto x and its weight R(|x - p|) / R(r') explodes).
+        own = (ix == columns) & (iy == rows)
+        p = jnp.where((hit & ~own)[..., None], eye + rel * (_depth_at(col, row, ix, iy) / z_safe)[..., None], p_tangent)
         gap = safe_sqrt(jnp.sum((p - p_tangent) ** 2, -1))
-        continuous = gap <= r + 2 * z_safe / focal
+        continuous = gap <= GAP_RATIO * r + 2 * z_safe / focal
         to_eye, to_eye_tangent = eye - p, eye - p_tangent
         d2, d2_tangent = jnp.sum(to_eye**2, -1), jnp.sum(to_eye_tangent**2, -1)
         seen = (d2 > 0) & (d2_tangent > 0)

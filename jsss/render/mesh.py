@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Mesh", "box", "fin", "load_obj", "plane", "uv_sphere"]
+__all__ = ["Mesh", "box", "fin", "is_closed", "load_obj", "plane", "uv_sphere", "weld"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,6 +76,30 @@ class Mesh:
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+
+def weld(mesh: Mesh, *, tolerance: float = 1e-9):
+    """Merge vertices at the same position (UV seams, hard edges): the surface's topology.
+
+    Returns
+    -------
+    positions : (U, 3); index : (V,) the welded vertex of each mesh vertex; faces : (F, 3) on U
+    """
+    scale = max(float(np.ptp(mesh.vertices)), 1e-300)
+    keys = np.round(mesh.vertices / (scale * tolerance)).astype(np.int64)
+    _, first, index = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    index = index.reshape(-1)
+    faces = index[mesh.faces]
+    keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    return mesh.vertices[first], index, faces[keep]  # collapsed triangles (at poles) dropped
+
+
+def is_closed(mesh: Mesh) -> bool:
+    """True when the welded surface has no boundary: every edge is shared by two triangles."""
+    _, _, faces = weld(mesh)
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return bool(np.all(counts == 2))
 
 
 def _grid_faces(rows: int, cols: int) -> np.ndarray:

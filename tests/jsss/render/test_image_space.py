@@ -122,7 +122,8 @@ def test_gradient_in_the_material_matches_finite_differences_and_is_finite_at_ze
     E = jnp.asarray(E)
 
     def total(a):
-        profile = SampledProfile(medium=Medium(a * jnp.ones(3), jnp.array([1.0, 1.2, 1.5]), 1.3))
+        profile = SampledProfile(medium=Medium(a * jnp.ones(3), jnp.array([1.0, 1.2, 1.5]), 1.3),
+                                 channel_weights=jnp.array([0.5, 0.3, 0.2]))  # fixed: no channel switches
         return image_space_exitance(profile, E, buffers, samples=16, disc_radius=8.0).sum()
 
     grad = jax.grad(total)(sigma_a)
