@@ -73,7 +73,7 @@ def plane_table(quick):
     for name in ("marble", "ketchup"):
         for size in sizes:
             scene = plane_scene(name, size)
-            base = with_knobs(plan_scene(scene), size=size)
+            base = with_knobs(plan_scene(scene, method="texture-space"), size=size)
             prep = prepare(scene, base)
             params = render_params(scene, base, dtype=jnp.float32)
             x = prep.texels.position[..., 0]
@@ -113,7 +113,7 @@ def sphere_table():
             "lights": [{"type": "directional", "direction": [0.3, 1.0, -0.4]}],
             "camera": {"position": [0, -90, 0], "resolution": [64, 64]},
             "render": {"texture_size": 96, "accuracy": 0.05}})
-        base = with_knobs(plan_scene(scene), size=96)
+        base = with_knobs(plan_scene(scene, method="texture-space"), size=96)
         prep = prepare(scene, base)
         params = render_params(scene, base, dtype=jnp.float64)
         E = np.asarray(irradiance_pass(params, prep), float)

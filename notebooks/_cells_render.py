@@ -31,7 +31,7 @@ for name in ("marble_sphere", "skin_backlit", "ketchup_plane"):
     scene = load_scene(os.path.join(examples, f"{name}.toml"))
     camera = replace(scene.camera, width=size[0], height=size[1])
     scene = replace(scene, camera=camera, texture_size=min(scene.texture_size, texture))
-    result = render(scene)
+    result = render(scene, plan_scene(scene, method="texture-space"))
     images[name] = tone_map(result.radiance)[0]
     print(name)
     print(result.plan.describe())
@@ -46,7 +46,8 @@ for ax, (name, image) in zip(axes, images.items()):
 ## Seen from far away, diffusion is below a pixel
 
 The same marble sphere from 200 m: the profile's RMS radius (about 5 mm) is smaller than a
-pixel's footprint, so the planner shades it Lambertian with the profile's total albedo.
+pixel's footprint, so the planner picks Lambert shading with the profile's total albedo
+(its calibration table, see `methods.ipynb`, predicts the smallest cost at the target).
 """),
     ("code", """
 scene = load_scene(os.path.join(examples, "marble_sphere.toml"))
@@ -58,7 +59,7 @@ print(plan_scene(far).describe())
 from jsss import dipole
 from jsss.gaussians import evaluate
 from jsss.render.profiles import render_profile
-plan = plan_scene(scene)
+plan = plan_scene(scene, method="texture-space")
 gs = render_profile(scene.material, plan.variances)
 r = np.geomspace(0.01, 60, 400)
 exact = np.asarray(dipole.profile(scene.material.medium, r))

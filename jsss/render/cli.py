@@ -5,6 +5,7 @@ Examples
 ::
 
     jsss-render examples/marble_sphere.toml -o marble.png --plan --timings
+    jsss-render examples/ketchup_plane.toml --method image-space --samples 64
 """
 
 from __future__ import annotations
@@ -22,6 +23,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--plan", action="store_true", help="print which passes run and why")
     p.add_argument("--timings", action="store_true", help="time each pass (compiles first, median of 3)")
     p.add_argument("--accuracy", type=float, default=None, help="override the scene's accuracy target")
+    p.add_argument("--method", default="auto",
+                   choices=("auto", "lambert", "normal-filtering", "image-space", "texture-space"),
+                   help="how to render subsurface light (default: the planner's choice from its calibration table)")
+    p.add_argument("--samples", type=int, default=None, help="image-space samples per pixel")
+    p.add_argument("--normal-filter", default="spectral", choices=("spectral", "naive"),
+                   help="which Patro filter --method normal-filtering uses")
     p.add_argument("--float64", action="store_true", help="render in float64 (default float32)")
     p.add_argument("--no-exr", action="store_true", help="write only the PNG")
     return p
@@ -43,7 +50,9 @@ def main(argv=None) -> int:
         scene = load_scene(args.scene)
         if args.accuracy is not None and not 0 < args.accuracy < 1:
             raise SceneError(f"--accuracy must lie in (0, 1); got {args.accuracy}.")
-        plan = plan_scene(scene, accuracy=args.accuracy)
+        method = {"auto": None, "normal-filtering": "normal filtering"}.get(args.method, args.method)
+        plan = plan_scene(scene, accuracy=args.accuracy, method=method, samples=args.samples,
+                          normal_filter=args.normal_filter)
         if args.plan:
             print(plan.describe(), flush=True)
         result = render(scene, plan, dtype=jnp.float64 if args.float64 else jnp.float32,

@@ -1,4 +1,13 @@
-"""Decide which passes a scene needs and with which knobs, and say why.
+"""Decide how to render a scene -- which method, which passes, which knobs -- and say why.
+
+**Method.** Four ways to produce subsurface light, from cheap to exact: ``lambert``
+(total albedo, no spread), ``normal filtering`` (Patro 2007), ``image-space`` integration
+(Mertens 2003) and ``texture-space`` diffusion (d'Eon 2007). The planner predicts each
+one's error and time for the scene from the measured calibration table
+(:mod:`.calibration`, written by ``benchmarks/methods.py --calibrate``) and takes the
+cheapest that meets the accuracy target; ``method=`` overrides it.
+
+**Texture-space passes** (when that method runs):
 
 "Simulate only the effects a scene calls for" (DESIGN.md): every pass of the renderer is
 switched on or off from measurable properties of the scene, and the knobs follow from its
@@ -27,16 +36,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .calibration import METHODS, choose_method, estimate_methods, knob_label, load_calibration, parse_knob
 from .lighting import light_geometry, shadow_map
-from .profiles import choose_variances
+from .mesh import is_closed
+from .profiles import choose_variances, full_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
 
 __all__ = ["PassDecision", "Plan", "plan_scene"]
 
 STRETCH_THRESHOLD = 0.10
-PASS_ORDER = ("texture geometry", "irradiance", "shadows", "layered profile", "diffusion", "stretch correction",
-              "translucent shadow maps", "specular", "camera")
+PASS_ORDER = ("texture geometry", "irradiance", "shadows", "layered profile", "normal filtering",
+              "image-space integration", "diffusion", "stretch correction", "translucent shadow maps", "specular",
+              "camera")
+TEXTURE_KNOBS = (0.2, 0.05, 0.01)  # profile targets the calibration renders texture space with
+SAMPLE_KNOBS = (8, 32, 128)  # samples per pixel the calibration renders image space with
 
 
 @dataclass(frozen=True)
@@ -57,6 +71,11 @@ class Plan:
     profile_error : float, relative RMS error of that profile (worst channel)
     texture_size : int; taps : int; max_ratio : float (blur step growth)
     pixel_size : float [mm] footprint of a pixel at the object's nearest point
+    method : one of ``lambert``, ``normal filtering``, ``image-space``, ``texture-space``
+    method_why : str; estimates : tuple of MethodEstimate (empty when the method was given)
+    knob : str, the chosen knob as the calibration table labels it (``"32 spp"``, ...)
+    samples : int, image-space samples per pixel; normal_filter : ``spectral`` or ``naive``
+    blur_pixels : float, the profile's RMS radius over the pixel footprint
     """
 
     decisions: tuple
@@ -66,6 +85,13 @@ class Plan:
     taps: int
     max_ratio: float
     pixel_size: float
+    method: str = "texture-space"
+    method_why: str = ""
+    estimates: tuple = ()
+    samples: int = 32
+    normal_filter: str = "spectral"
+    blur_pixels: float = 0.0
+    knob: str = ""
 
     def on(self, name: str) -> bool:
         for d in self.decisions:
@@ -78,11 +104,26 @@ class Plan:
         return dataclasses.replace(self, decisions=decisions)
 
     def describe(self) -> str:
+        head = [f"method: {self.method} -- {self.method_why}",
+                f"  profile RMS radius spans {self.blur_pixels:.3g} pixels"]
+        if self.estimates:
+            head.append("  predicted for this scene (from the calibration table):")
+            head.append(f"    {'method':<18} {'knob':<12} {'error':>8} {'ms':>9}  basis")
+            for e in self.estimates:
+                mark = "*" if (e.method, e.knob) == (self.method, self.knob) else " "
+                head.append(f"  {mark} {e.method:<18} {e.knob:<12} {100 * e.error:7.2f}% {e.ms:9.3g}  {e.basis}")
         width = max(len(d.name) for d in self.decisions)
         lines = [f"  {'on ' if d.on else 'off'}  {d.name:<{width}}  {d.why}" for d in self.decisions]
-        knobs = (f"  knobs: {len(self.variances)} Gaussians (profile error {100 * self.profile_error:.2f} %), "
-                 f"texture {self.texture_size}^2, {self.taps}-tap blur, steps grow variance <= {self.max_ratio:g}x")
-        return "\n".join(["plan:"] + lines + [knobs])
+        if self.method == "texture-space":
+            knobs = (f"  knobs: {len(self.variances)} Gaussians (profile error {100 * self.profile_error:.2f} %), "
+                     f"texture {self.texture_size}^2, {self.taps}-tap blur, steps grow variance <= {self.max_ratio:g}x")
+        elif self.method == "image-space":
+            knobs = f"  knobs: {self.samples} samples per pixel"
+        elif self.method == "normal filtering":
+            knobs = f"  knobs: {self.normal_filter} filter"
+        else:
+            knobs = "  knobs: none"
+        return "\n".join(head + ["plan:"] + lines + [knobs])
 
 
 def _pixel_footprint(scene: Scene) -> float:
@@ -99,41 +140,108 @@ def _uv_unit_length(scene: Scene) -> float:
     return float(np.median(lengths[lengths > 0]))
 
 
-def plan_scene(scene: Scene, *, accuracy: float | None = None) -> Plan:
-    """The plan for ``scene`` (its own accuracy target unless ``accuracy`` is given)."""
+def _profile_rms(material) -> float:
+    """RMS radius [mm] of the material's whole profile (widest channel): sqrt(sum 2 v w / sum w)."""
+    full = full_profile(material)
+    v, w = np.asarray(full.variances), np.abs(np.asarray(full.weights))
+    return float(np.max(np.sqrt((2 * v[:, None] * w).sum(0) / np.maximum(w.sum(0), 1e-300))))
+
+
+def plan_scene(scene: Scene, *, accuracy: float | None = None, method: str | None = None,
+               samples: int | None = None, normal_filter: str = "spectral", calibration=None) -> Plan:
+    """The plan for ``scene`` (its own accuracy target unless ``accuracy`` is given).
+
+    Parameters
+    ----------
+    scene : Scene
+    accuracy : float in (0, 1), optional
+        Relative RMS error the frame may have.
+    method : str, optional
+        One of ``lambert``, ``normal filtering``, ``image-space``, ``texture-space``; default:
+        the cheapest predicted to meet ``accuracy`` by the calibration table.
+    samples : int, optional
+        Image-space samples per pixel (default: the calibration's choice, else 32).
+    normal_filter : {"spectral", "naive"}
+        Which Patro filter a given ``method="normal filtering"`` uses.
+    calibration : path, optional
+        Another calibration table (default: the one shipped with jsss).
+    """
     target = scene.accuracy if accuracy is None else accuracy
+    if not 0 < target < 1:
+        raise ValueError(f"accuracy must lie in (0, 1) (a relative error); got {target}.")
+    if method is not None and method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}.")
+    if normal_filter not in ("spectral", "naive"):
+        raise ValueError(f"normal_filter must be 'spectral' or 'naive'; got {normal_filter!r}.")
+    if samples is not None and samples < 1:
+        raise ValueError(f"samples must be >= 1 per pixel; got {samples}.")
     material = scene.material
-    decisions = {"texture geometry": (True, "positions, normals and stretch per texel (once per mesh)"),
-                 "irradiance": (True, f"{len(scene.lights)} light(s) with Fresnel transmittance"),
+    pixel = _pixel_footprint(scene)
+    rms = _profile_rms(material)
+    blur = rms / pixel
+    unit = _uv_unit_length(scene)  # texture size: a texel no larger than the pixel footprint
+    size = 64
+    while size < scene.texture_size and unit / size > pixel:
+        size *= 2
+    size = min(size, scene.texture_size)
+    pixels = scene.camera.width * scene.camera.height
+    work = {m: pixels for m in METHODS} | {"texture-space": size * size}
+    estimates: tuple = ()
+    if method is None:
+        estimates = tuple(estimate_methods(load_calibration(calibration), blur, work, closed=is_closed(scene.mesh)))
+        chosen, method_why = choose_method(estimates, target)
+        method = chosen.method
+        knobs = parse_knob(method, chosen.knob)
+        samples = knobs.get("samples", samples)
+        normal_filter = knobs.get("normal_filter", normal_filter)
+        texture_target = knobs.get("target", target)
+        knob = chosen.knob
+    else:
+        method_why = "set by the caller (--method)"
+        texture_target = target
+        knob = None
+    samples = 32 if samples is None else samples
+    if knob is None:
+        knob = knob_label(method, samples=samples, normal_filter=normal_filter, target=texture_target)
+
+    decisions = {"irradiance": (True, f"{len(scene.lights)} light(s) with Fresnel transmittance"),
                  "shadows": (True, "shadow map per light"),
                  "camera": (True, "rasterize, look up, tone map")}
-    gs, error, reached = choose_variances(material, target / 2)
+    gs, error, reached = choose_variances(material, texture_target / 2)
     variances, w = np.asarray(gs.variances), np.asarray(gs.weights)
-    pixel = _pixel_footprint(scene)
     total = w.sum(0)
-    rms = float(np.max(np.sqrt(np.maximum((2 * variances[:, None] * w).sum(0), 0) / np.maximum(total, 1e-300))))
-    diffusion = rms >= pixel
-    decisions["diffusion"] = (diffusion, (
-        f"profile RMS radius {rms:.3g} mm {'>=' if diffusion else '<'} pixel footprint {pixel:.3g} mm"
-        + ("" if diffusion else "; Lambert with the total albedo " + "/".join(f"{t:.3f}" for t in total))))
     if material.layers:
         decisions["layered profile"] = (True, f"{len(material.layers)} layers"
                                               + (" on a base" if material.base is not None else ""))
     else:
         decisions["layered profile"] = (False, f"material is {material.kind}, not layered")
-    # Texture size: a texel no larger than the pixel footprint.
-    unit = _uv_unit_length(scene)
-    size = 64
-    while size < scene.texture_size and unit / size > pixel:
-        size *= 2
-    size = min(size, scene.texture_size)
-    variation = stretch_variation(scene.mesh)
-    stretch = diffusion and variation >= STRETCH_THRESHOLD
-    decisions["stretch correction"] = (stretch, f"UV stretch varies by {100 * variation:.0f} % "
-                                                f"({'>=' if variation >= STRETCH_THRESHOLD else '<'} "
-                                                f"{100 * STRETCH_THRESHOLD:.0f} %)"
-                                       + ("" if diffusion else "; no diffusion to correct"))
-    decisions["translucent shadow maps"] = _tsm_decision(scene, variances, w, target)
+    texture = method == "texture-space"
+    diffusion = texture and rms >= pixel
+    spread = f"profile RMS radius {rms:.3g} mm {'>=' if rms >= pixel else '<'} pixel footprint {pixel:.3g} mm"
+    albedo = "/".join(f"{t:.3f}" for t in total)
+    decisions["diffusion"] = (diffusion, {
+        "texture-space": spread + ("" if diffusion else "; Lambert with the total albedo " + albedo),
+        "lambert": f"Lambert with the total albedo {albedo} ({spread})",
+        "normal filtering": "normal filtering stands in for it",
+        "image-space": "image-space integration stands in for it"}[method])
+    decisions["normal filtering"] = (method == "normal filtering", (
+        f"{normal_filter} filter of the normals per channel, gain = the profile's Hankel transform "
+        f"(falls to 1/2 near {1 / rms:.3g} rad/mm)") if method == "normal filtering" else f"method is {method}")
+    decisions["image-space integration"] = (method == "image-space", (
+        f"{samples} samples per pixel drawn from the profile, 1/4 uniform on a disc, balance heuristic")
+        if method == "image-space" else f"method is {method}")
+    if texture:
+        decisions["texture geometry"] = (True, "positions, normals and stretch per texel (once per mesh)")
+        variation = stretch_variation(scene.mesh)
+        stretch = diffusion and variation >= STRETCH_THRESHOLD
+        decisions["stretch correction"] = (stretch, f"UV stretch varies by {100 * variation:.0f} % "
+                                                    f"({'>=' if variation >= STRETCH_THRESHOLD else '<'} "
+                                                    f"{100 * STRETCH_THRESHOLD:.0f} %)"
+                                           + ("" if diffusion else "; no diffusion to correct"))
+        decisions["translucent shadow maps"] = _tsm_decision(scene, variances, w, texture_target)
+    else:
+        for name in ("texture geometry", "stretch correction", "translucent shadow maps"):
+            decisions[name] = (False, f"texture space only; method is {method}")
     spec = material.specular > 0
     decisions["specular"] = (spec, f"Beckmann m = {material.roughness:g}, weight {material.specular:g}"
                              if spec else "material specular = 0")
@@ -142,7 +250,9 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None) -> Plan:
         on, why = decisions[profile_pass]
         decisions[profile_pass] = (on, why + " (target not reachable with 12 Gaussians; best shown)")
     ordered = tuple(PassDecision(name, *decisions[name]) for name in PASS_ORDER)
-    return Plan(ordered, variances, error, size, 7, 2.0 if target < 0.15 else 4.0, pixel)
+    return Plan(ordered, variances, error, size, 7, 2.0 if texture_target < 0.15 else 4.0, pixel,
+                method=method, method_why=method_why, estimates=estimates, samples=samples,
+                normal_filter=normal_filter, blur_pixels=blur, knob=knob)
 
 
 def _tsm_decision(scene: Scene, variances, weights, target):

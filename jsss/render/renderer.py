@@ -1,5 +1,8 @@
 """Run a plan: static geometry once (NumPy), then the differentiable JAX passes.
 
+Texture-space plans run the passes below; the pixel methods (Lambert, normal filtering,
+image-space) run :mod:`.pixel_methods`.
+
 :func:`prepare` computes everything that depends only on geometry (texel positions,
 shadow maps, the camera's visibility); :func:`render_image` is a pure JAX function of the
 material's Gaussian weights and variances and the lights' radiant colours, so ``jit``
@@ -18,7 +21,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .blur import blur_schedule, hierarchical_blur
+from .image_space import SampledProfile
 from .lighting import irradiance, light_geometry, lookup, shadow_map, translucent_transmission
+from .pixel_methods import PixelPrepared, pixel_radiance, prepare_pixels
 from .planner import Plan, plan_scene
 from .profiles import render_profile
 from .raster import rasterize, surface_attributes
@@ -37,12 +42,15 @@ class RenderParams(eqx.Module):
     weights : (n, 3) Gaussian weights per channel; variances : (n,) [mm^2]
     radiant : (L, 3) colour times intensity of each light
     eta : (3,) relative index of refraction
+    profile : SampledProfile, the exact profile the pixel methods integrate (the dipole of a
+        homogeneous material, else the Gaussian sum above)
     """
 
     weights: jax.Array
     variances: jax.Array
     radiant: jax.Array
     eta: jax.Array
+    profile: SampledProfile
 
 
 def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32) -> RenderParams:
@@ -52,8 +60,13 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32) -
     radiant = np.array([np.asarray(l.color) * l.intensity for l in scene.lights])
     eta = scene.material.eta if medium is None else medium.eta
     eta = jnp.broadcast_to(jnp.asarray(eta), (3,))
-    return RenderParams(jnp.asarray(gs.weights, dtype), jnp.asarray(gs.variances, dtype),
-                        jnp.asarray(radiant, dtype), eta.astype(dtype))
+    weights, variances = jnp.asarray(gs.weights, dtype), jnp.asarray(gs.variances, dtype)
+    medium = scene.material.medium if medium is None else medium
+    if medium is not None and scene.material.kind == "medium":
+        profile = SampledProfile(medium=jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), medium))
+    else:
+        profile = SampledProfile(weights=weights, variances=variances)
+    return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile)
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,7 +176,7 @@ class RenderResult:
     radiance: np.ndarray
     plan: Plan
     timings: dict
-    prepared: Prepared
+    prepared: Prepared | PixelPrepared
 
 
 def _timed(fn, *args, repeats: int):
@@ -188,9 +201,11 @@ def render(scene: Scene, plan: Plan | None = None, *, dtype=jnp.float32, time_pa
         t0 = time.perf_counter()
         plan = plan_scene(scene)
         timings["plan"] = time.perf_counter() - t0
+    material = scene.material
+    if plan.method != "texture-space":
+        return _render_pixels(scene, plan, dtype=dtype, timings=timings, time_passes=time_passes, repeats=repeats)
     prep = prepare(scene, plan, timings=timings)
     params = render_params(scene, plan, dtype=dtype)
-    material = scene.material
     if not time_passes:
         frame = jax.jit(lambda p: render_image(p, prep, plan, roughness=material.roughness,
                                                specular=material.specular))
@@ -208,3 +223,19 @@ def render(scene: Scene, plan: Plan | None = None, *, dtype=jnp.float32, time_pa
         repeats=repeats)
     return RenderResult(np.asarray(radiance), plan, timings, prep)
 
+
+
+def _render_pixels(scene: Scene, plan: Plan, *, dtype, timings: dict, time_passes: bool, repeats: int):
+    params = render_params(scene, plan, dtype=dtype)
+    prep = prepare_pixels(scene, plan.method, params.profile, normal_filter=plan.normal_filter, timings=timings)
+    material = scene.material
+    frame = jax.jit(lambda p: pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples,
+                                             specular=plan.on("specular"), roughness=material.roughness,
+                                             specular_weight=material.specular))
+    if time_passes:
+        radiance, timings[f"{plan.method} frame"] = _timed(frame, params, repeats=repeats)
+    else:
+        t0 = time.perf_counter()
+        radiance = frame(params)
+        timings["frame (with compile)"] = time.perf_counter() - t0
+    return RenderResult(np.asarray(radiance), plan, timings, prep)

@@ -23,7 +23,7 @@ def _with_texture(plan: Plan, size: int) -> Plan:
 def _shadow_edge(material, size):
     """Plane lit from above with the half x < 0 shadowed: texel exitance along the middle row."""
     scene = parse_scene(flat_plane(material, texture_size=size))
-    plan = _with_texture(plan_scene(scene), size)
+    plan = _with_texture(plan_scene(scene, method="texture-space"), size)
     prep = prepare(scene, plan)
     params = render_params(scene, plan, dtype=jnp.float64)
     x = prep.texels.position[..., 0]
@@ -61,7 +61,7 @@ def test_diffusion_preserves_power_on_closed_surfaces():
                                                                           [0.5, 0.3, 0.2]], "eta": 1.3}}
     for geometry in ({"shape": "sphere", "radius": 20.0}, {"shape": "box", "size": 30.0, "segments": 4}):
         scene = parse_scene(scene_dict(geometry=geometry, material=material))
-        plan = _with_texture(plan_scene(scene), 128)
+        plan = _with_texture(plan_scene(scene, method="texture-space"), 128)
         prep = prepare(scene, plan)
         params = render_params(scene, plan, dtype=jnp.float64)
         assert np.allclose(np.asarray(params.weights).sum(0), 1.0)
@@ -95,7 +95,7 @@ def test_renders_in_float32_without_nans(geometry):
     lights = [{"type": "directional", "direction": [-1.0, 0.2, -0.3]}, {"type": "point", "position": [0, -60, 40],
                                                                           "intensity": 2000.0}]
     scene = parse_scene(scene_dict(geometry=geometry, material={"name": "skin1"}, lights=lights))
-    plan = plan_scene(scene)
+    plan = plan_scene(scene, method="texture-space")
     prep = prepare(scene, plan)
     image = render_image(render_params(scene, plan, dtype=jnp.float32), prep, plan)
     assert image.dtype == jnp.float32
@@ -108,7 +108,7 @@ def _small_scene():
                                              "eta": 1.3},
                                    camera={"position": [0, -60, 10], "fov": 30, "resolution": [24, 18]},
                                    render={"texture_size": 32, "accuracy": 0.1}))
-    plan = plan_scene(scene)
+    plan = plan_scene(scene, method="texture-space")
     return scene, plan, prepare(scene, plan)
 
 
@@ -136,7 +136,6 @@ def test_image_is_linear_in_light_intensity():
     params = render_params(scene, plan, dtype=jnp.float64)
 
     def brightness(scale):
-        return jnp.sum(render_image(params.__class__(params.weights, params.variances, params.radiant * scale,
-                                                     params.eta), prep, plan))
+        return jnp.sum(render_image(dataclasses.replace(params, radiant=params.radiant * scale), prep, plan))
 
     assert float(jax.grad(brightness)(1.0)) == pytest.approx(float(brightness(1.0)), rel=1e-9)

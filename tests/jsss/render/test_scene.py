@@ -101,3 +101,16 @@ def test_command_line_bad_scene_is_one_line_and_exit_2(tmp_path):
     out = _run(str(scene), cwd=tmp_path)
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "radius: must be > 0" in out.stderr
+
+
+def test_command_line_method_override_renders_with_it(tmp_path):
+    scene = tmp_path / "small.toml"
+    scene.write_text('[geometry]\nshape = "sphere"\nradius = 15\nsegments = 32\nrings = 16\n'
+                     '[material]\nname = "marble"\n[[lights]]\ntype = "directional"\ndirection = [0.5, 1, -0.5]\n'
+                     '[camera]\nposition = [0, -90, 20]\nresolution = [40, 30]\n')
+    out = _run(str(scene), "-o", str(tmp_path / "out.png"), "--plan", "--method", "image-space", "--samples", "4",
+               "--no-exr", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "method: image-space -- set by the caller" in out.stdout and "4 samples per pixel" in out.stdout
+    bad = _run(str(scene), "--samples", "0", "--method", "image-space", cwd=tmp_path)
+    assert bad.returncode == 2 and "samples" in bad.stderr

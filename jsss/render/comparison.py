@@ -1,0 +1,85 @@
+"""Render one scene with every method and knob and measure each against the reference.
+
+Used by ``benchmarks/methods.py`` (the accuracy-vs-time table and the planner's
+calibration table) and by ``notebooks/methods.ipynb``. Frames are diffuse only (the
+specular lobe is the same in every method) and timed per frame after compilation (median
+of ``repeats``); one-time geometry work (rasterizing, shadow maps, the Laplacian's
+eigenvectors) is reported apart as ``prep_ms``; the part of it only that method does is the
+calibration row's ``prep_ms``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import jax.numpy as jnp
+import numpy as np
+
+from .calibration import CalibrationRow
+from .mesh import is_closed
+from .planner import SAMPLE_KNOBS, TEXTURE_KNOBS, plan_scene
+from .reference import ReferenceFrame, reference_radiance
+from .renderer import render
+from .scene import Scene
+
+__all__ = ["MethodFrame", "VARIANTS", "compare_methods", "relative_rms", "scene_at_distance"]
+
+VARIANTS = (("lambert", {}),
+            ("normal filtering", {"normal_filter": "naive"}),
+            ("normal filtering", {"normal_filter": "spectral"}),
+            *(("image-space", {"samples": n}) for n in SAMPLE_KNOBS),
+            *(("texture-space", {"accuracy": a}) for a in TEXTURE_KNOBS))
+_PREP = ("plan", "texture geometry", "shadows", "camera raster", "camera raster + shadows", "normal filter")
+_OWN_PREP = ("texture geometry", "normal filter")  # one-time work only that method does
+
+
+@dataclass(frozen=True, eq=False)
+class MethodFrame:
+    """One method's frame of a scene, its error against the reference and its cost."""
+
+    row: CalibrationRow
+    radiance: np.ndarray
+    prep_ms: float
+
+
+def relative_rms(image, reference, mask) -> float:
+    """sqrt(mean |image - reference|^2) / sqrt(mean |reference|^2) over the object's pixels."""
+    diff = (np.asarray(image) - reference)[mask]
+    return float(np.sqrt(np.mean(diff**2) / np.mean(reference[mask] ** 2)))
+
+
+def scene_at_distance(scene: Scene, factor: float, *, width: int, height: int, texture_size: int = 256) -> Scene:
+    """``scene`` with its camera moved ``factor`` times as far from what it looks at, at a new resolution."""
+    cam = scene.camera
+    target = np.asarray(cam.look_at, float)
+    position = target + factor * (np.asarray(cam.position, float) - target)
+    camera = dataclasses.replace(cam, position=tuple(position), width=width, height=height)
+    return dataclasses.replace(scene, camera=camera, texture_size=min(texture_size, scene.texture_size))
+
+
+def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None = None,
+                    reference_samples: int = 400_000, variants=VARIANTS, repeats: int = 3, progress=None):
+    """Frames of ``scene`` by every (method, knobs) in ``variants``, with their errors and times.
+
+    Returns (reference, list of MethodFrame). ``progress`` (callable of a str) hears each frame.
+    """
+    if reference is None:
+        reference = reference_radiance(scene, samples=reference_samples)
+    frames = []
+    for method, knobs in variants:
+        plan = plan_scene(scene, method=method, **knobs)
+        plan = plan.replace("specular", False, "diffuse only: the lobe is the same in every method")
+        result = render(scene, plan, dtype=jnp.float32, time_passes=True, repeats=repeats)
+        frame_ms = 1000 * sum(t for k, t in result.timings.items() if k not in _PREP)
+        prep_ms = 1000 * sum(t for k, t in result.timings.items() if k in _PREP)
+        own_ms = 1000 * sum(t for k, t in result.timings.items() if k in _OWN_PREP)
+        work = plan.texture_size**2 if method == "texture-space" else scene.camera.width * scene.camera.height
+        knob = plan.knob
+        row = CalibrationRow(name, round(plan.blur_pixels, 4), method, knob,
+                             relative_rms(result.radiance, reference.radiance, reference.mask), round(frame_ms, 3),
+                             int(work), round(own_ms, 3), is_closed(scene.mesh))
+        frames.append(MethodFrame(row, result.radiance, prep_ms))
+        if progress is not None:
+            progress(f"{name}: {method} {knob}: {100 * row.error:.2f} % in {frame_ms:.1f} ms")
+    return reference, frames

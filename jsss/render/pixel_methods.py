@@ -1,0 +1,145 @@
+"""The three methods that shade from the camera's pixels: Lambert, normal filtering, image-space.
+
+All three start from the camera's G-buffer (:func:`camera_buffers`) and end like the
+texture-space path: exitance :math:`M` -> :func:`diffuse_radiance` (+ specular). They
+differ in how :math:`M` arises from the irradiance:
+
+* ``lambert`` -- :math:`M = \\rho E(x)`: the profile's total albedo, no spread (right when the
+  profile is smaller than a pixel);
+* ``normal filtering`` -- :math:`M_c = \\rho_c E(x; n_c)` with per-channel filtered normals
+  (Patro 2007, :mod:`.normal_filter`): a blurred look at Lambert's cost, no light across
+  shadow borders;
+* ``image-space`` -- :math:`M` by Mertens' integration (:mod:`.image_space`), noise falling
+  with the samples per pixel.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .image_space import (CameraBuffers, SampledProfile, camera_buffers, image_space_exitance, profile_radius,
+                          rms_radius)
+from .lighting import irradiance, light_geometry, shadow_map
+from .mesh import weld
+from .normal_filter import laplacian_spectrum, smooth_normals, spectral_filter
+from .raster import surface_attributes
+from .scene import Scene
+from .shading import diffuse_radiance, specular_radiance
+
+__all__ = ["PixelPrepared", "filtered_normals", "pixel_exitance", "pixel_radiance", "prepare_pixels"]
+
+
+@dataclass(frozen=True, eq=False)
+class PixelPrepared:
+    """Geometry-only data of a pixel method (NumPy).
+
+    Attributes
+    ----------
+    buffers : CameraBuffers
+    lights : tuple of LightGeometry per light (true normals)
+    channel_lights : tuple over channels of tuples over lights, with the filtered normals
+        (normal filtering only, else None)
+    view : (H, W, 3) unit vectors to the eye
+    disc_radius : float [mm], image-space's uniform disc
+    """
+
+    buffers: CameraBuffers
+    lights: tuple
+    channel_lights: tuple | None
+    view: np.ndarray
+    disc_radius: float
+
+
+def filtered_normals(scene: Scene, profile: SampledProfile, *, kind: str = "spectral", eigenpairs: int = 128,
+                     rms: float | None = None) -> np.ndarray:
+    """Per-vertex normals filtered per channel (V, C, 3) for ``scene.mesh`` and ``profile``.
+
+    ``spectral`` uses the profile's own transfer function (cut-off at its diffusion length);
+    ``naive`` iterates Patro's neighbour mean until its spread matches ``rms`` [mm] (default:
+    the profile's RMS radius), about ``(rms / edge)^2`` passes: each is a random-walk step of
+    one edge.
+    """
+    mesh = scene.mesh
+    if kind == "spectral":
+        spectrum = laplacian_spectrum(mesh, eigenpairs)
+        return spectral_filter(spectrum, mesh.normals, lambda w: np.asarray(profile.transfer(jnp.asarray(w))))
+    if kind == "naive":
+        positions, _, faces = weld(mesh)
+        edge = float(np.linalg.norm(positions[faces[:, 0]] - positions[faces[:, 1]], axis=1).mean())
+        rms = rms_radius(profile) if rms is None else rms
+        iterations = int(np.clip(np.ceil((rms / edge) ** 2), 1, 400))
+        if profile.medium is not None:
+            sigma_tr = np.asarray(profile.medium.sigma_tr) * np.ones(3)
+        else:  # a Gaussian sum has no sigma_tr: the one of a dipole as wide
+            sigma_tr = np.full(3, 1.0 / max(rms, 1e-6))
+        return smooth_normals(mesh, sigma_tr, iterations=iterations)
+    raise ValueError(f"normal filter kind must be 'spectral' or 'naive'; got {kind!r}.")
+
+
+def prepare_pixels(scene: Scene, method: str, profile: SampledProfile, *, normal_filter: str = "spectral",
+                   eigenpairs: int = 128, timings: dict | None = None) -> PixelPrepared:
+    """Rasterize the camera view and the lights' shadows; filter the normals if ``method`` needs them."""
+    timings = {} if timings is None else timings
+    t0 = time.perf_counter()
+    buffers = camera_buffers(scene.mesh, scene.camera)
+    maps = [shadow_map(scene.mesh, light, size=scene.shadow_map_size) for light in scene.lights]
+    lights = tuple(light_geometry(buffers.position, buffers.normal, buffers.mask, light, m)
+                   for light, m in zip(scene.lights, maps))
+    view = buffers.eye - buffers.position
+    view /= np.where(buffers.mask, np.linalg.norm(view, axis=-1), 1.0)[..., None]
+    timings["camera raster + shadows"] = time.perf_counter() - t0
+    channel_lights = None
+    if method == "normal filtering":
+        t0 = time.perf_counter()
+        filtered = filtered_normals(scene, profile, kind=normal_filter, eigenpairs=eigenpairs)
+        raster, faces = buffers.raster, scene.mesh.faces
+        # Two-sided shading turned some pixels' normals around: turn their filtered normals too.
+        facing = np.sign((surface_attributes(raster, faces, scene.mesh.normals) * buffers.normal).sum(-1))
+        channel_lights = tuple(
+            tuple(light_geometry(buffers.position, surface_attributes(raster, faces, filtered[:, c]) * facing[..., None],
+                                 buffers.mask, light, m) for light, m in zip(scene.lights, maps))
+            for c in range(filtered.shape[1]))
+        timings["normal filter"] = time.perf_counter() - t0
+    disc = profile_radius(profile) if method == "image-space" else 0.0
+    return PixelPrepared(buffers, lights, channel_lights, view, disc)
+
+
+def _as(tree, dtype):
+    return jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), tree)
+
+
+def pixel_exitance(method: str, profile: SampledProfile, radiant, eta, prep: PixelPrepared, *, samples: int = 32,
+                   seed: int = 0):
+    """Exitance (H, W, C) of a pixel method: a pure JAX function of the profile and the lights."""
+    dtype = radiant.dtype
+    albedo = profile.albedo().astype(dtype)
+    if method == "normal filtering":
+        channels = [irradiance([_as(g, dtype) for g in lights], radiant, eta)[..., c]
+                    for c, lights in enumerate(prep.channel_lights)]
+        return albedo * jnp.stack(channels, -1)
+    E = irradiance([_as(g, dtype) for g in prep.lights], radiant, eta)
+    if method == "lambert":
+        return albedo * E
+    if method == "image-space":
+        return image_space_exitance(profile, E, prep.buffers, samples=samples, disc_radius=prep.disc_radius,
+                                    seed=seed)
+    raise ValueError(f"unknown pixel method {method!r}; one of lambert, normal filtering, image-space.")
+
+
+def pixel_radiance(method: str, profile: SampledProfile, radiant, eta, prep: PixelPrepared, *, samples: int = 32,
+                   specular: bool = True, roughness: float = 0.35, specular_weight: float = 1.0, seed: int = 0):
+    """Linear radiance (H, W, 3) of a pixel method."""
+    M = pixel_exitance(method, profile, radiant, eta, prep, samples=samples, seed=seed)
+    dtype = M.dtype
+    mask = jnp.asarray(prep.buffers.mask, dtype)
+    cos_view = jnp.asarray((prep.buffers.normal * prep.view).sum(-1), dtype)
+    L = diffuse_radiance(M, cos_view, eta)
+    if specular:
+        L = L + specular_radiance(prep.buffers.normal, prep.view, [_as(g, dtype) for g in prep.lights], radiant, eta,
+                                  roughness=roughness, weight=specular_weight)
+    return L * mask[..., None]
