@@ -92,7 +92,8 @@ def main():
             _, frames = compare_methods(scene, name, reference=reference)
             for f in frames:
                 r = f.row
-                print(f"| {name} | {factor:g}x | {r.blur_pixels:.3g} | {r.method} | {r.knob} | {100 * r.error:.2f} % | "
+                knob = r.knob + (f" ({f.gaussians} Gaussians)" if f.gaussians else "")
+                print(f"| {name} | {factor:g}x | {r.blur_pixels:.3g} | {r.method} | {knob} | {100 * r.error:.2f} % | "
                       f"{r.ms:.3g} | {r.prep_ms:.0f} | {f.prep_ms:.0f} | {reference_ms / max(r.ms, 1e-3):.0f} |", flush=True)
                 rows.append(r)
             print(f"| {name} | {factor:g}x | | reference | {points} points | noise {100 * reference.noise:.2f} % | "

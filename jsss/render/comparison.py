@@ -41,6 +41,7 @@ class MethodFrame:
     row: CalibrationRow
     radiance: np.ndarray
     prep_ms: float
+    gaussians: int  # texture space's number of Gaussians (0 for the other methods)
 
 
 def relative_rms(image, reference, mask) -> float:
@@ -79,7 +80,8 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
         row = CalibrationRow(name, round(plan.blur_pixels, 4), method, knob,
                              relative_rms(result.radiance, reference.radiance, reference.mask), round(frame_ms, 3),
                              int(work), round(own_ms, 3), is_closed(scene.mesh))
-        frames.append(MethodFrame(row, result.radiance, prep_ms))
+        gaussians = len(plan.variances) if method == "texture-space" else 0
+        frames.append(MethodFrame(row, result.radiance, prep_ms, gaussians))
         if progress is not None:
             progress(f"{name}: {method} {knob}: {100 * row.error:.2f} % in {frame_ms:.1f} ms")
     return reference, frames
