@@ -11,8 +11,8 @@ radius over one pixel's footprint, the *blur*): Lambert is exact at a blur far b
 pixel and wrong at many; image-space noise grows with the blur. So a prediction for a
 new scene takes, per method and knob, the worst error among calibration frames whose
 blur lies within a factor 2 of the scene's (or the nearest frame's when none does), and
-scales the measured time -- one frame plus the method's own preparation -- by the work:
-pixels for pixel methods, texels for texture space. Frames of objects with open edges (a
+scales the measured frame time by the work (pixels for pixel methods, texels for texture
+space) and adds the method's own preparation (scaled too for texture space's texel bake). Frames of objects with open edges (a
 plane) are kept apart from closed ones: light that leaves through an open edge is lost in
 the reference and in image-space integration but kept by the others.
 """
@@ -151,8 +151,12 @@ def estimate_methods(rows, blur_pixels: float, work: dict, *, closed: bool = Tru
         else:
             worst = group[int(np.argmin(distance))]
             basis = f"nearest frame {worst.scene} at blur {worst.blur_pixels:.3g} px"
-        # One frame with its own preparation: what rendering this scene once costs.
-        ms = float(np.median([(r.ms + r.prep_ms) * work[method] / r.work for r in (alike or [worst])]))
+        # One frame with its own preparation: what rendering this scene once costs. Frames
+        # scale with the work; so does texture space's texel bake, while the normal filter's
+        # preparation is mostly the mesh's eigenvectors, which do not follow the pixels.
+        ms = float(np.median([r.ms * work[method] / r.work
+                              + r.prep_ms * (work[method] / r.work if method == "texture-space" else 1.0)
+                              for r in (alike or [worst])]))
         estimates.append(MethodEstimate(method, knob, worst.error, ms, basis))
     return sorted(estimates, key=lambda e: e.ms)
 

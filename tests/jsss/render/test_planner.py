@@ -76,7 +76,8 @@ def _row(method, knob, blur, error, ms, prep=0.0, work=100):
 SYNTHETIC = (_row("lambert", "", 0.5, 0.01, 1.0), _row("lambert", "", 8.0, 0.30, 1.0),
              _row("image-space", "32 spp", 0.5, 0.05, 20.0), _row("image-space", "32 spp", 8.0, 0.06, 20.0),
              _row("texture-space", "profile 5 %", 0.5, 0.02, 50.0, prep=30.0),
-             _row("texture-space", "profile 5 %", 8.0, 0.02, 50.0, prep=30.0))
+             _row("texture-space", "profile 5 %", 8.0, 0.02, 50.0, prep=30.0),
+             _row("normal filtering", "spectral", 8.0, 0.3, 1.0, prep=50.0))
 
 
 def test_estimates_take_the_worst_alike_frame_and_scale_time_by_work():
@@ -85,6 +86,7 @@ def test_estimates_take_the_worst_alike_frame_and_scale_time_by_work():
     assert estimates["lambert"].error == 0.30 and "blur" in estimates["lambert"].basis
     assert estimates["image-space"].ms == 40.0  # twice the pixels
     assert estimates["texture-space"].ms == 80.0  # frame + its own preparation
+    assert estimates["normal filtering"].ms == 52.0  # frames follow the pixels, the eigenvectors do not
     far = {e.method: e for e in estimate_methods(SYNTHETIC, 0.01, work)}
     assert far["lambert"].error == 0.01 and "nearest frame" in far["lambert"].basis
 
