@@ -7,14 +7,16 @@ brute-force surface integral of the exact profile and its time, and writes
 tuned constant.
 
 The error of a method depends mostly on how many pixels the profile spans (its RMS
-radius over one pixel's footprint, the *blur*): Lambert is exact at a blur far below a
-pixel and wrong at many; image-space noise grows with the blur. So a prediction for a
-new scene takes, per method and knob, the worst error among calibration frames whose
-blur lies within a factor 2 of the scene's (or the nearest frame's when none does), and
-scales the measured frame time by the work (pixels for pixel methods, texels for texture
-space) and adds the method's own preparation (scaled too for texture space's texel bake). Frames of objects with open edges (a
-plane) are kept apart from closed ones: light that leaves through an open edge is lost in
-the reference and in image-space integration but kept by the others.
+radius over one pixel's footprint, the *blur*): Lambert's error shrinks as the blur falls
+below a pixel (down to the dimming diffusion causes on a curved object, about v/R^2) and
+grows with many; image-space noise grows with the blur. So a prediction for a new scene
+takes, per method and knob, the worst error among calibration frames whose blur lies
+within a factor 2 of the scene's (or the nearest frame's when none does), scales the
+measured frame time by the work (pixels for pixel methods, texels for texture space) and
+adds the method's own preparation (scaled too for texture space's texel bake). Frames of
+objects with open edges (a plane) are kept apart from closed ones: light that leaves
+through an open edge is lost in the reference and in image-space integration but kept by
+the others.
 """
 
 from __future__ import annotations
@@ -104,7 +106,8 @@ def load_calibration(path=None) -> tuple[CalibrationRow, ...]:
     except FileNotFoundError:
         raise ValueError(f"{path}: no calibration table; run `python benchmarks/methods.py --calibrate`.") from None
     except (json.JSONDecodeError, KeyError, TypeError) as error:
-        raise ValueError(f"{path}: not a calibration table ({error}); rerun benchmarks/methods.py --calibrate.") from None
+        raise ValueError(f"{path}: not a calibration table ({error}); "
+                         "rerun benchmarks/methods.py --calibrate.") from None
     if not rows:
         raise ValueError(f"{path}: the calibration table has no rows.")
     return rows

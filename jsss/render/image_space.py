@@ -186,6 +186,7 @@ class CameraBuffers:
     Attributes
     ----------
     position : (H, W, 3) [mm]; normal : (H, W, 3), turned towards the camera
+    view : (H, W, 3) unit vectors from the surface point to the eye
     depth : (H, W) [mm] along the view axis; mask : (H, W) bool
     eye, right, down, forward : (3,) the camera frame; focal : pixels per unit tangent
     raster : Raster, the triangle and barycentrics behind each pixel (for more attributes)
@@ -193,6 +194,7 @@ class CameraBuffers:
 
     position: np.ndarray
     normal: np.ndarray
+    view: np.ndarray
     depth: np.ndarray
     mask: np.ndarray
     eye: np.ndarray
@@ -219,14 +221,14 @@ def camera_buffers(mesh: Mesh, camera: PerspectiveView) -> CameraBuffers:
     position = surface_attributes(raster, mesh.faces, mesh.vertices)
     normal = surface_attributes(raster, mesh.faces, mesh.normals)
     normal /= np.where(mask, np.linalg.norm(normal, axis=-1), 1.0)[..., None]
-    view = np.asarray(camera.position, float) - position
+    eye = np.asarray(camera.position, float)
+    view = eye - position
+    view /= np.where(mask, np.linalg.norm(view, axis=-1), 1.0)[..., None]
     flip = (normal * view).sum(-1) < 0
     normal = np.where(flip[..., None], -normal, normal)
     right, down, forward = camera.frame()
-    eye = np.asarray(camera.position, float)
-    depth = np.where(mask, (np.asarray(position) - eye) @ forward, 0.0)
-    return CameraBuffers(np.asarray(position, float), np.asarray(normal, float), depth, np.asarray(mask, bool),
-                         eye, right, down, forward, float(camera.focal), raster)
+    depth = np.where(mask, (position - eye) @ forward, 0.0)
+    return CameraBuffers(position, normal, view, depth, mask, eye, right, down, forward, float(camera.focal), raster)
 
 
 def _tangent_frame(n):

@@ -127,6 +127,10 @@ class LightGeometry(NamedTuple):
     behind: np.ndarray
     to_light: np.ndarray
 
+    def astype(self, dtype) -> "LightGeometry":
+        """The same geometry as ``jnp`` arrays of ``dtype`` (what the JAX passes read)."""
+        return LightGeometry(*(jnp.asarray(a, dtype) for a in self))
+
 
 def light_geometry(positions, normals, valid, light: Light, shadow: ShadowMap) -> LightGeometry:
     """Shadow test and thickness of ``positions`` (P, 3) against a light's shadow map."""

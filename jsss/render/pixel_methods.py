@@ -18,7 +18,6 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -44,14 +43,12 @@ class PixelPrepared:
     lights : tuple of LightGeometry per light (true normals)
     channel_lights : tuple over channels of tuples over lights, with the filtered normals
         (normal filtering only, else None)
-    view : (H, W, 3) unit vectors to the eye
     disc_radius : float [mm], image-space's uniform disc
     """
 
     buffers: CameraBuffers
     lights: tuple
     channel_lights: tuple | None
-    view: np.ndarray
     disc_radius: float
 
 
@@ -90,8 +87,6 @@ def prepare_pixels(scene: Scene, method: str, profile: SampledProfile, *, normal
     maps = [shadow_map(scene.mesh, light, size=scene.shadow_map_size) for light in scene.lights]
     lights = tuple(light_geometry(buffers.position, buffers.normal, buffers.mask, light, m)
                    for light, m in zip(scene.lights, maps))
-    view = buffers.eye - buffers.position
-    view /= np.where(buffers.mask, np.linalg.norm(view, axis=-1), 1.0)[..., None]
     timings["camera raster + shadows"] = time.perf_counter() - t0
     channel_lights = None
     if method == "normal filtering":
@@ -100,17 +95,13 @@ def prepare_pixels(scene: Scene, method: str, profile: SampledProfile, *, normal
         raster, faces = buffers.raster, scene.mesh.faces
         # Two-sided shading turned some pixels' normals around: turn their filtered normals too.
         facing = np.sign((surface_attributes(raster, faces, scene.mesh.normals) * buffers.normal).sum(-1))
-        channel_lights = tuple(
-            tuple(light_geometry(buffers.position, surface_attributes(raster, faces, filtered[:, c]) * facing[..., None],
-                                 buffers.mask, light, m) for light, m in zip(scene.lights, maps))
-            for c in range(filtered.shape[1]))
+        channel_normals = [surface_attributes(raster, faces, filtered[:, c]) * facing[..., None]
+                           for c in range(filtered.shape[1])]
+        channel_lights = tuple(tuple(light_geometry(buffers.position, normals, buffers.mask, light, m)
+                                     for light, m in zip(scene.lights, maps)) for normals in channel_normals)
         timings["normal filter"] = time.perf_counter() - t0
     disc = profile_radius(profile) if method == "image-space" else 0.0
-    return PixelPrepared(buffers, lights, channel_lights, view, disc)
-
-
-def _as(tree, dtype):
-    return jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), tree)
+    return PixelPrepared(buffers, lights, channel_lights, disc)
 
 
 def pixel_exitance(method: str, profile: SampledProfile, radiant, eta, prep: PixelPrepared, *, samples: int = 32,
@@ -119,10 +110,10 @@ def pixel_exitance(method: str, profile: SampledProfile, radiant, eta, prep: Pix
     dtype = radiant.dtype
     albedo = profile.albedo().astype(dtype)
     if method == "normal filtering":
-        channels = [irradiance([_as(g, dtype) for g in lights], radiant, eta)[..., c]
+        channels = [irradiance([g.astype(dtype) for g in lights], radiant, eta)[..., c]
                     for c, lights in enumerate(prep.channel_lights)]
         return albedo * jnp.stack(channels, -1)
-    E = irradiance([_as(g, dtype) for g in prep.lights], radiant, eta)
+    E = irradiance([g.astype(dtype) for g in prep.lights], radiant, eta)
     if method == "lambert":
         return albedo * E
     if method == "image-space":
@@ -137,9 +128,10 @@ def pixel_radiance(method: str, profile: SampledProfile, radiant, eta, prep: Pix
     M = pixel_exitance(method, profile, radiant, eta, prep, samples=samples, seed=seed)
     dtype = M.dtype
     mask = jnp.asarray(prep.buffers.mask, dtype)
-    cos_view = jnp.asarray((prep.buffers.normal * prep.view).sum(-1), dtype)
+    cos_view = jnp.asarray((prep.buffers.normal * prep.buffers.view).sum(-1), dtype)
     L = diffuse_radiance(M, cos_view, eta)
     if specular:
-        L = L + specular_radiance(prep.buffers.normal, prep.view, [_as(g, dtype) for g in prep.lights], radiant, eta,
+        lights = [g.astype(dtype) for g in prep.lights]
+        L = L + specular_radiance(prep.buffers.normal, prep.buffers.view, lights, radiant, eta,
                                   roughness=roughness, weight=specular_weight)
     return L * mask[..., None]

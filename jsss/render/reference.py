@@ -126,8 +126,6 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     exitance = np.zeros((buffers.mask.size, 3))
     exitance[visible] = M
     exitance = exitance.reshape(buffers.mask.shape + (3,))
-    view = buffers.eye - buffers.position
-    view /= np.where(buffers.mask, np.linalg.norm(view, axis=-1), 1.0)[..., None]
-    cos_view = (buffers.normal * view).sum(-1)
+    cos_view = (buffers.normal * buffers.view).sum(-1)
     L = np.asarray(diffuse_radiance(jnp.asarray(exitance), jnp.asarray(cos_view), eta)) * buffers.mask[..., None]
     return ReferenceFrame(L, buffers.mask, noise, samples, float(near))

@@ -21,12 +21,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .blur import blur_schedule, hierarchical_blur
-from .image_space import SampledProfile
+from .image_space import SampledProfile, camera_buffers
 from .lighting import irradiance, light_geometry, lookup, shadow_map, translucent_transmission
 from .pixel_methods import PixelPrepared, pixel_radiance, prepare_pixels
 from .planner import Plan, plan_scene
 from .profiles import render_profile
-from .raster import rasterize, surface_attributes
+from .raster import surface_attributes
 from .scene import Scene
 from .shading import diffuse_radiance, specular_radiance
 from .texture_space import TexelGeometry, bake_texels
@@ -96,20 +96,11 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
                          for light, m in zip(scene.lights, maps))
     timings["shadows"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    cam = scene.camera
-    xy, depth = cam.project(scene.mesh.vertices)
-    raster = rasterize(xy, depth, scene.mesh.faces, (cam.height, cam.width))
-    mask = raster.mask
-    position = surface_attributes(raster, scene.mesh.faces, scene.mesh.vertices)
-    normal = surface_attributes(raster, scene.mesh.faces, scene.mesh.normals)
-    normal /= np.where(mask, np.linalg.norm(normal, axis=-1), 1.0)[..., None]
-    uv = surface_attributes(raster, scene.mesh.faces, scene.mesh.uvs)
-    view = np.asarray(cam.position, float) - position
-    view /= np.where(mask, np.linalg.norm(view, axis=-1), 1.0)[..., None]
-    # Two-sided: a surface seen from behind (an open fin) is shaded from the side we see.
-    flip = (normal * view).sum(-1) < 0
-    normal = np.where(flip[..., None], -normal, normal)
-    pixel_lights = tuple(light_geometry(position, normal, mask, light, m) for light, m in zip(scene.lights, maps))
+    camera = camera_buffers(scene.mesh, scene.camera)  # two-sided: normals turned towards the camera
+    mask, normal, view = camera.mask, camera.normal, camera.view
+    uv = surface_attributes(camera.raster, scene.mesh.faces, scene.mesh.uvs)
+    pixel_lights = tuple(light_geometry(camera.position, normal, mask, light, m)
+                         for light, m in zip(scene.lights, maps))
     timings["camera raster"] = time.perf_counter() - t0
     if plan.on("stretch correction"):
         stretch = texels.stretch
@@ -120,12 +111,8 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
     return Prepared(texels, texel_lights, mask, uv, normal, view, pixel_lights, stretch, schedule)
 
 
-def _as(tree, dtype):
-    return jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), tree)
-
-
 def irradiance_pass(params: RenderParams, prep: Prepared):
-    lights = [_as(g, params.radiant.dtype) for g in prep.texel_lights]
+    lights = [g.astype(params.radiant.dtype) for g in prep.texel_lights]
     return irradiance(lights, params.radiant, params.eta)
 
 
@@ -141,7 +128,7 @@ def diffusion_pass(params: RenderParams, prep: Prepared, plan: Plan, E):
 def exitance_pass(params: RenderParams, prep: Prepared, plan: Plan, blurred):
     M = jnp.einsum("nc,nhwc->hwc", params.weights, blurred)
     if plan.on("translucent shadow maps"):
-        lights = [_as(g, blurred.dtype) for g in prep.texel_lights]
+        lights = [g.astype(blurred.dtype) for g in prep.texel_lights]
         M = M + translucent_transmission(blurred, params.weights, params.variances, lights,
                                          jnp.asarray(prep.texels.mask, blurred.dtype))
     return M
@@ -154,7 +141,7 @@ def camera_pass(params: RenderParams, prep: Prepared, plan: Plan, M, roughness: 
     cos_view = jnp.asarray((prep.pixel_normal * prep.pixel_view).sum(-1), dtype)
     L = diffuse_radiance(exitance, cos_view, params.eta)
     if plan.on("specular"):
-        lights = [_as(g, dtype) for g in prep.pixel_lights]
+        lights = [g.astype(dtype) for g in prep.pixel_lights]
         L = L + specular_radiance(prep.pixel_normal, prep.pixel_view, lights, params.radiant,
                                   params.eta, roughness=roughness, weight=specular)
     return L * mask[..., None]
@@ -222,7 +209,6 @@ def render(scene: Scene, plan: Plan | None = None, *, dtype=jnp.float32, time_pa
         jax.jit(lambda p, m: camera_pass(p, prep, plan, m, material.roughness, material.specular)), params, M,
         repeats=repeats)
     return RenderResult(np.asarray(radiance), plan, timings, prep)
-
 
 
 def _render_pixels(scene: Scene, plan: Plan, *, dtype, timings: dict, time_passes: bool, repeats: int):
