@@ -10,11 +10,13 @@ the medium outside (1.3 for skin against air).
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
 from .numerics import as_float_array, safe_sqrt
 
 __all__ = [
     "diffuse_fresnel_reflectance",
+    "diffuse_fresnel_transmittance",
     "fresnel_reflectance",
     "fresnel_transmittance",
     "internal_reflection_parameter",
@@ -113,6 +115,46 @@ def diffuse_fresnel_reflectance(eta):
     above = -1.440 / safe_eta**2 + 0.710 / safe_eta + 0.668 + 0.0636 * safe_eta
     below = -0.4400 + 0.7099 / safe_eta - 0.3319 / safe_eta**2 + 0.0636 / safe_eta**3
     return jnp.where(eta >= 1, above, below)
+
+
+_GAUSS_LEGENDRE = np.polynomial.legendre.leggauss(32)
+
+
+def diffuse_fresnel_transmittance(eta):
+    r"""Mean Fresnel transmittance of diffuse light arriving from *outside*, :math:`1 - F_{dr,ext}`.
+
+    .. math:: T_{dr}(\eta) = \int_{2\pi} F_t(\cos\theta_o, \eta)\,\cos\theta_o\,d\omega_o / \pi
+                           = \int_0^1 F_t(\mu, \eta)\,2\mu\,d\mu,
+
+    with :math:`\theta_o` the angle *outside* the medium. By reciprocity this is also the
+    integral that turns an exit Fresnel lobe :math:`F_t(\cos\theta_o)` into exitance:
+    radiance :math:`L = M F_t(\cos\theta_o) / (\pi T_{dr})` carries exactly :math:`M`.
+    Snell's invariance of :math:`\eta^2\cos\theta\,d\omega` gives
+    :math:`T_{dr} = \eta^2\,(1 - F_{dr})` with :math:`F_{dr}` the *internal* diffuse
+    reflectance of :func:`diffuse_fresnel_reflectance`, so it is not :math:`1 - F_{dr}`
+    (0.908 against 0.403 at ``eta = 1.5``).
+
+    Computed exactly (not fitted): 32-point Gauss-Legendre quadrature in :math:`\mu`,
+    on :math:`[\mu_c, 1]` where :math:`\mu_c = \sqrt{1 - \eta^2}` is the critical cosine
+    for ``eta < 1`` (0 otherwise). Error below 1e-8 for ``eta >= 1`` and 1e-5 for
+    ``eta`` in [0.6, 1) (``tests/jsss/test_fresnel.py``); differentiable in ``eta``.
+
+    Parameters
+    ----------
+    eta : array_like
+        Relative index (medium / outside), > 0.
+
+    Returns
+    -------
+    Array of ``eta``'s shape, in (0, 1]; exactly 1 at ``eta = 1``.
+    """
+    eta = as_float_array(eta)
+    nodes, weights = (jnp.asarray(a, eta.dtype) for a in _GAUSS_LEGENDRE)
+    lower = safe_sqrt(jnp.maximum(1 - jnp.square(eta), 0.0))
+    half = (1 - lower)[..., None] / 2
+    mu = lower[..., None] + half * (nodes + 1)
+    transmitted = fresnel_transmittance(mu, eta[..., None])
+    return (transmitted * 2 * mu * weights * half).sum(-1)
 
 
 def internal_reflection_parameter(eta):

@@ -1,13 +1,24 @@
 r"""The camera pass: diffused textures and a specular lobe turned into radiance, then tone mapping.
 
-Exitance :math:`M` [W/mm^2] leaving the surface is spread over outgoing directions by the
-exit Fresnel transmittance, normalised so that all of :math:`M` leaves:
+Exitance :math:`M` [W/mm^2] is the flux per area that has *left* the surface (the dipole's
+:math:`R_d` already counts the light the boundary sends back in: with :math:`\sigma_a = 0`
+its total is 1). It is spread over outgoing directions by the exit Fresnel transmittance,
+normalised so that exactly :math:`M` leaves:
 
-.. math:: L_d = \frac{F_t(\cos\theta_o, \eta)}{\pi\,(1 - F_{dr}(\eta))}\,M,
-          \qquad \int_{2\pi} \frac{F_t(\cos\theta, \eta)}{\pi(1 - F_{dr})}\cos\theta\,d\omega = 1.
+.. math:: L_d(\theta_o) = \frac{F_t(\cos\theta_o, \eta)}{\pi\,T_{dr}(\eta)}\,M,
+          \qquad T_{dr} = \int_0^1 F_t(\mu, \eta)\,2\mu\,d\mu = 1 - F_{dr,ext},
+          \qquad \int_{2\pi} L_d\cos\theta_o\,d\omega_o = M,
+
+with :math:`\theta_o` measured *outside* (:func:`jsss.fresnel.diffuse_fresnel_transmittance`).
+The normalisation is the *external* one. Dividing by the internal :math:`1 - F_{dr}(\eta)`
+(the dipole's boundary term) instead releases :math:`\eta^2 M`, because
+:math:`\eta^2\cos\theta\,d\omega` is invariant under refraction and so
+:math:`T_{dr} = \eta^2 (1 - F_{dr})`: 2.25 times the light that entered at :math:`\eta = 1.5`.
+``tests/jsss/render/test_energy.py`` checks this with a furnace, where a non-absorbing
+medium must return exactly the flux that entered, for every method.
 
 (Jensen's :math:`S_d = F_t R_d F_t / \pi` leaves out the normalisation and loses the
-fraction :math:`F_{dr}` a second time, though the dipole's boundary condition has
+fraction :math:`F_{dr,ext}` a second time, though the dipole's boundary condition has
 already counted it.) The specular lobe is a microfacet BRDF with the Beckmann
 distribution and exact dielectric Fresnel reflectance, as d'Eon uses for skin.
 """
@@ -17,15 +28,19 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..fresnel import diffuse_fresnel_reflectance, fresnel_reflectance, fresnel_transmittance
+from ..fresnel import diffuse_fresnel_transmittance, fresnel_reflectance, fresnel_transmittance
 
 __all__ = ["diffuse_radiance", "specular_radiance", "tone_map"]
 
 
 def diffuse_radiance(exitance, cos_view, eta):
-    """Radiance [W/(mm^2 sr)] of exitance ``exitance`` (..., C) seen at ``cos_view`` (...)."""
+    r"""Radiance [W/(mm^2 sr)] of exitance ``exitance`` (..., C) seen at ``cos_view`` (...).
+
+    ``cos_view`` is the cosine outside the surface; ``eta`` (C,) the relative index. Over
+    the hemisphere :math:`\int L \cos\theta\,d\omega` is ``exitance`` exactly.
+    """
     cos = jnp.clip(cos_view, 0.0, 1.0)[..., None]
-    norm = jnp.pi * (1 - diffuse_fresnel_reflectance(eta))
+    norm = jnp.pi * diffuse_fresnel_transmittance(eta)
     return exitance * fresnel_transmittance(cos, eta) / norm
 
 

@@ -5,11 +5,12 @@ import numpy as np
 import pytest
 
 from jsss import dipole
-from jsss.fresnel import diffuse_fresnel_reflectance, fresnel_transmittance
+from jsss.fresnel import fresnel_transmittance
 from jsss.materials import jensen2001
 from jsss.render import parse_scene, plan_scene, render
 from jsss.render.comparison import relative_rms
 from jsss.render.reference import reference_radiance, surface_samples
+from tests.helpers import external_diffuse_transmittance
 from tests.jsss.render.scenes import flat_plane, scene_dict
 
 
@@ -30,12 +31,17 @@ def _plane(material, width=200.0):
 
 
 def test_lambert_on_a_lit_plane_is_the_closed_form():
-    """L = rho E Ft(1) / (pi (1 - Fdr)) with E = Ft(1) for a unit light at normal incidence."""
+    """L = rho E Ft(1) / (pi T_dr) with E = Ft(1) for a unit light at normal incidence.
+
+    T_dr = int Ft(mu) 2 mu dmu over the outside hemisphere (quadrature here, not jsss's), so
+    that all of the exitance rho E leaves; 1 - Fdr (internal) would release eta^2 rho E.
+    """
     scene = _plane({"name": "marble"})
     medium = jensen2001("marble")
     eta = jnp.asarray(medium.eta)
     ft = np.asarray(fresnel_transmittance(jnp.ones(3), eta))
-    expected = np.asarray(dipole.total_reflectance(medium)) * ft**2 / (np.pi * (1 - np.asarray(diffuse_fresnel_reflectance(eta))))
+    t_dr = np.array([external_diffuse_transmittance(float(e)) for e in np.broadcast_to(medium.eta, 3)])
+    expected = np.asarray(dipole.total_reflectance(medium)) * ft**2 / (np.pi * t_dr)
     L = _diffuse(scene, "lambert")
     assert np.allclose(L[6:18, 6:18], expected, rtol=1e-4)
 
