@@ -24,6 +24,7 @@ __all__ = [
     "single_scattering",
     "single_scattering_albedo",
     "single_scattering_brdf",
+    "single_scattering_brdf_from_cosines",
 ]
 
 
@@ -53,10 +54,13 @@ def _geometry(medium, omega_i, omega_o):
     """Refracted cosines, the phase-angle cosine and the Fresnel product F = Ft_i Ft_o."""
     omega_i = as_float_array(omega_i)
     omega_o = as_float_array(omega_o)
+    tangential_dot = jnp.sum(omega_i[..., :2] * omega_o[..., :2], axis=-1)
+    return _geometry_from_cosines(medium, omega_i[..., 2], omega_o[..., 2], tangential_dot)
+
+
+def _geometry_from_cosines(medium, cos_i, cos_o, tangential_dot):
     n = len(medium.shape)
-    cos_i = append_axes(omega_i[..., 2], n)
-    cos_o = append_axes(omega_o[..., 2], n)
-    tangential_dot = append_axes(jnp.sum(omega_i[..., :2] * omega_o[..., :2], axis=-1), n)
+    cos_i, cos_o, tangential_dot = (append_axes(as_float_array(a), n) for a in (cos_i, cos_o, tangential_dot))
     eta = medium.eta
     cos_i_in = refracted_cosine(cos_i, eta)
     cos_o_in = refracted_cosine(cos_o, eta)
@@ -121,8 +125,20 @@ def single_scattering_brdf(medium: Medium, omega_i, omega_o, *, g=0.0):
     against a Monte Carlo walk stopped after its first collision (0.0382 +- 0.0003
     against 0.0379 at albedo 0.5, eta 1.3; Jensen's form 0.064). Units 1/sr.
     """
+    omega_i = as_float_array(omega_i)
+    omega_o = as_float_array(omega_o)
+    tangential_dot = jnp.sum(omega_i[..., :2] * omega_o[..., :2], axis=-1)
+    return single_scattering_brdf_from_cosines(medium, omega_i[..., 2], omega_o[..., 2], tangential_dot, g=g)
+
+
+def single_scattering_brdf_from_cosines(medium: Medium, cos_i, cos_o, tangential_dot, *, g=0.0):
+    """:func:`single_scattering_brdf` from the frame-free quantities a renderer has per point.
+
+    ``cos_i = n . w_i``, ``cos_o = n . w_o`` and ``tangential_dot = w_i . w_o - cos_i cos_o``
+    (the dot product of the two directions' tangential parts); shapes ``S``, result ``S + C``.
+    """
     _check_g(g)
-    cos_i_in, cos_o_in, cos_phase, fresnel = _geometry(medium, omega_i, omega_o)
+    cos_i_in, cos_o_in, cos_phase, fresnel = _geometry_from_cosines(medium, cos_i, cos_o, tangential_dot)
     sigma_s, sigma_t = _coefficients(medium, g)
     albedo = sigma_s / sigma_t
     return albedo * fresnel * henyey_greenstein(cos_phase, g) / ((cos_i_in + cos_o_in) * jnp.square(medium.eta))
@@ -145,9 +161,7 @@ def single_scattering_albedo(medium: Medium, cos_incident=1.0, *, g=0.0, nodes: 
     sin_o = jnp.sqrt(1 - mu**2)[:, None]
     omega_i = jnp.stack(jnp.broadcast_arrays(sin_i, jnp.zeros_like(sin_i), cos_incident[..., None, None]), -1)
     omega_o = jnp.stack(jnp.broadcast_arrays(sin_o * jnp.cos(phi), sin_o * jnp.sin(phi), mu[:, None]), -1)
-    omega_i = jnp.broadcast_to(omega_i, omega_o.shape[:-1] + (3,)) if omega_i.ndim < omega_o.ndim else \
-        jnp.broadcast_to(omega_i, jnp.broadcast_shapes(omega_i.shape, omega_o.shape))
-    omega_o = jnp.broadcast_to(omega_o, omega_i.shape)
+    omega_i, omega_o = jnp.broadcast_arrays(omega_i, omega_o)
     f = single_scattering_brdf(medium, omega_i, omega_o, g=g)  # (..., nodes, n_phi) + C
     n = len(medium.shape)
     quad = append_axes(mu * weights, n)[:, None] * (2 * jnp.pi / n_phi)

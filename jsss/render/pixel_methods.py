@@ -28,7 +28,7 @@ from .mesh import weld
 from .normal_filter import laplacian_spectrum, smooth_normals, spectral_filter
 from .raster import surface_attributes
 from .scene import Scene
-from .shading import diffuse_radiance, specular_radiance
+from .shading import specular_radiance, surface_radiance
 
 __all__ = ["PixelPrepared", "filtered_normals", "pixel_exitance", "pixel_radiance", "prepare_pixels"]
 
@@ -123,15 +123,18 @@ def pixel_exitance(method: str, profile: SampledProfile, radiant, eta, prep: Pix
 
 
 def pixel_radiance(method: str, profile: SampledProfile, radiant, eta, prep: PixelPrepared, *, samples: int = 32,
-                   specular: bool = True, roughness: float = 0.35, specular_weight: float = 1.0, seed: int = 0):
-    """Linear radiance (H, W, 3) of a pixel method."""
+                   specular: bool = True, roughness: float = 0.35, specular_weight: float = 1.0, seed: int = 0,
+                   single_scattering: bool = False):
+    """Linear radiance (H, W, 3) of a pixel method (``single_scattering`` needs a dipole ``profile``)."""
     M = pixel_exitance(method, profile, radiant, eta, prep, samples=samples, seed=seed)
     dtype = M.dtype
     mask = jnp.asarray(prep.buffers.mask, dtype)
     cos_view = jnp.asarray((prep.buffers.normal * prep.buffers.view).sum(-1), dtype)
-    L = diffuse_radiance(M, cos_view, eta)
+    lights = [g.astype(dtype) for g in prep.lights]
+    medium = profile.medium if single_scattering else None
+    L = surface_radiance(M, cos_view, eta, medium=medium, normals=jnp.asarray(prep.buffers.normal, dtype),
+                         view_dirs=jnp.asarray(prep.buffers.view, dtype), light_geometry=lights, radiant=radiant)
     if specular:
-        lights = [g.astype(dtype) for g in prep.lights]
         L = L + specular_radiance(prep.buffers.normal, prep.buffers.view, lights, radiant, eta,
                                   roughness=roughness, weight=specular_weight)
     return L * mask[..., None]

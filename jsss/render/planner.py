@@ -26,6 +26,10 @@ accuracy target:
 * **translucent shadow maps** -- off when no light crosses between opposite faces (normals
   more than 120 degrees apart), or when the thinnest such part passes
   less than a tenth of the target of the profile's light (:math:`e^{-d^2/2v}` weighting);
+* **single scattering** -- Jensen's first-bounce term with its own angular law, for a
+  homogeneous medium whose single-scattered light is at least a quarter of the target of the
+  light leaving (:func:`single_scattering_share`); it takes that share from the diffusion
+  light rather than adding to it (the dipole already holds every order);
 * **layered profile** -- only for layered materials; **specular** -- when the material has one.
 """
 
@@ -34,8 +38,13 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
+from ..dipole import total_reflectance
+from ..fresnel import fresnel_transmittance
+from ..single_scattering import single_scattering_albedo
 from .calibration import METHODS, choose_method, estimate_methods, knob_label, load_calibration, parse_knob
 from .lighting import light_geometry, shadow_map
 from .mesh import is_closed
@@ -43,12 +52,12 @@ from .profiles import choose_variances, full_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
 
-__all__ = ["PassDecision", "Plan", "plan_scene"]
+__all__ = ["PassDecision", "Plan", "plan_scene", "single_scattering_share"]
 
 STRETCH_THRESHOLD = 0.10
 PASS_ORDER = ("texture geometry", "irradiance", "shadows", "layered profile", "normal filtering",
-              "image-space integration", "diffusion", "stretch correction", "translucent shadow maps", "specular",
-              "camera")
+              "image-space integration", "diffusion", "stretch correction", "translucent shadow maps",
+              "single scattering", "specular", "camera")
 TEXTURE_KNOBS = (0.2, 0.05, 0.01)  # profile targets the calibration renders texture space with
 SAMPLE_KNOBS = (8, 32, 128)  # samples per pixel the calibration renders image space with
 
@@ -242,6 +251,7 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: str | Non
     else:
         for name in ("texture geometry", "stretch correction", "translucent shadow maps"):
             decisions[name] = (False, f"texture space only; method is {method}")
+    decisions["single scattering"] = _single_scattering_decision(material, target)
     spec = material.specular > 0
     decisions["specular"] = (spec, f"Beckmann m = {material.roughness:g}, weight {material.specular:g}"
                              if spec else "material specular = 0")
@@ -281,3 +291,26 @@ def _tsm_decision(scene: Scene, variances, weights, target):
     on = share >= 0.1 * target
     return on, (f"thinnest part light cuts through: {thinnest:.3g} mm, passing {share:.2e} of the profile's light "
                 f"({'>=' if on else '<'} {0.1 * target:.2g})")
+
+
+def single_scattering_share(medium) -> np.ndarray:
+    """Single-scattered light over all the light leaving, per channel, under light along the normal.
+
+    Both per unit flux arriving: :func:`jsss.single_scattering.single_scattering_albedo` over
+    the dipole's total times the entry transmittance.
+    """
+    medium = jax.tree_util.tree_map(lambda a: np.asarray(a, float), medium)  # NumPy float64, whatever JAX's default
+    single = np.asarray(single_scattering_albedo(medium, jnp.asarray(1.0)))
+    diffusion = np.asarray(total_reflectance(medium) * fresnel_transmittance(jnp.asarray(1.0), medium.eta))
+    return single / np.maximum(diffusion, 1e-300)
+
+
+def _single_scattering_decision(material, target):
+    if material.medium is None:
+        return False, f"needs a homogeneous medium; material is {material.kind}"
+    share = single_scattering_share(material.medium) * np.ones(3)
+    on = bool(share.max() >= target / 4)
+    shares = "/".join(f"{100 * s:.1f}" for s in share)
+    return on, (f"first bounce carries {shares} % of the light leaving "
+                f"({'>=' if on else '<'} a quarter of the target, {100 * target / 4:.2g} %); "
+                "it replaces that share of the diffusion light")

@@ -28,7 +28,7 @@ from .planner import Plan, plan_scene
 from .profiles import render_profile
 from .raster import surface_attributes
 from .scene import Scene
-from .shading import diffuse_radiance, specular_radiance
+from .shading import specular_radiance, surface_radiance
 from .texture_space import TexelGeometry, bake_texels
 
 __all__ = ["Prepared", "RenderParams", "RenderResult", "prepare", "render", "render_image", "render_params"]
@@ -139,9 +139,12 @@ def camera_pass(params: RenderParams, prep: Prepared, plan: Plan, M, roughness: 
     mask = jnp.asarray(prep.pixel_mask, dtype)
     exitance = lookup(M, prep.pixel_uv, prep.texels.mask)
     cos_view = jnp.asarray((prep.pixel_normal * prep.pixel_view).sum(-1), dtype)
-    L = diffuse_radiance(exitance, cos_view, params.eta)
+    lights = [g.astype(dtype) for g in prep.pixel_lights]
+    single = plan.on("single scattering") and params.profile.medium is not None
+    L = surface_radiance(exitance, cos_view, params.eta, medium=params.profile.medium if single else None,
+                         normals=jnp.asarray(prep.pixel_normal, dtype), view_dirs=jnp.asarray(prep.pixel_view, dtype),
+                         light_geometry=lights, radiant=params.radiant)
     if plan.on("specular"):
-        lights = [g.astype(dtype) for g in prep.pixel_lights]
         L = L + specular_radiance(prep.pixel_normal, prep.pixel_view, lights, params.radiant,
                                   params.eta, roughness=roughness, weight=specular)
     return L * mask[..., None]
@@ -217,7 +220,8 @@ def _render_pixels(scene: Scene, plan: Plan, *, dtype, timings: dict, time_passe
     material = scene.material
     frame = jax.jit(lambda p: pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples,
                                              specular=plan.on("specular"), roughness=material.roughness,
-                                             specular_weight=material.specular))
+                                             specular_weight=material.specular,
+                                             single_scattering=plan.on("single scattering")))
     if time_passes:
         radiance, timings[f"{plan.method} frame"] = _timed(frame, params, repeats=repeats)
     else:

@@ -1,0 +1,209 @@
+"""Subsurface light of jsss's renders against a volumetric path tracer (Mitsuba 3): transport truth.
+
+    pip install -e '.[truth]' && python benchmarks/transport_truth.py [--quick] [--spp N]
+
+Mitsuba renders the same mesh, camera and lights with a homogeneous medium (sigma_s =
+sigma_s', g = 0: the similarity model the dipole is given in) inside a rough dielectric
+(Beckmann) of the material's eta. Point and directional lights cannot reach through a
+*smooth* dielectric in a path tracer, so each frame is rendered at two roughnesses and
+extrapolated to the smooth limit linearly in alpha^2. The subsurface part is the frame with
+the medium minus the frame with a purely absorbing interior (albedo 0), rendered with the
+same seed so that their surface reflections cancel. Russian roulette starts after 10^5
+bounces (albedo 0.999 walks are long). The path tracer's noise comes from independent
+chunks (seeds). Before any of that, a white Lambertian object is rendered by both (it must
+agree to 1 %), which proves that camera, image orientation and light units are the same.
+
+A plane is open; a medium needs a closed surface, so the plane becomes the top face of a
+box 30 mm deep (the lights see only its top; pixels are compared where jsss sees the plane).
+
+Printed per scene, method and channel: the ratio of summed subsurface radiance jsss /
+Mitsuba and the relative RMS error against it, with the path tracer's own noise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import trimesh  # noqa: E402
+
+from jsss.render import load_scene, plan_scene, render  # noqa: E402
+from jsss.render.image_space import camera_buffers  # noqa: E402
+from jsss.render.lighting import light_geometry, shadow_map  # noqa: E402
+
+EXAMPLES = os.path.join(os.path.dirname(__file__), "..", "examples")
+ROUGHNESS = (0.1, 0.2)
+
+
+def _mitsuba():
+    try:
+        import mitsuba as mi
+    except ImportError:
+        sys.exit("transport_truth.py needs Mitsuba 3: pip install -e '.[truth]'")
+    mi.set_variant("scalar_rgb")
+    return mi
+
+
+def _with_resolution(scene, width, height):
+    import dataclasses
+
+    camera = dataclasses.replace(scene.camera, width=width, height=height)
+    return dataclasses.replace(scene, camera=camera)
+
+
+def _mesh_file(scene, folder):
+    """The object's surface as PLY: the scene's mesh, or for a plane a closed box under it."""
+    v, f = scene.mesh.vertices, scene.mesh.faces
+    extent = np.ptp(v, axis=0)
+    if extent[2] < 1e-9:  # a plane: the top face of a 30 mm deep box
+        box = trimesh.creation.box(extents=(extent[0], extent[1], 30.0))
+        box.apply_translation((v[:, 0].mean(), v[:, 1].mean(), v[:, 2].mean() - 15.0))
+        mesh = box
+    else:
+        mesh = trimesh.Trimesh(v, f, process=True)  # merges seam duplicates: a closed surface
+        mesh.fix_normals()
+    path = os.path.join(folder, "object.ply")
+    mesh.export(path)
+    return path
+
+
+def _mitsuba_scene(mi, scene, ply, bsdf, interior=None):
+    cam = scene.camera
+    lights = {}
+    for i, light in enumerate(scene.lights):
+        value = (np.asarray(light.color) * light.intensity).tolist()
+        if light.kind == "directional":
+            lights[f"light{i}"] = {"type": "directional", "direction": list(map(float, light.direction)),
+                                   "irradiance": {"type": "rgb", "value": value}}
+        else:
+            lights[f"light{i}"] = {"type": "point", "position": list(map(float, light.position)),
+                                   "intensity": {"type": "rgb", "value": value}}
+    shape = {"type": "ply", "filename": ply, "face_normals": True, "bsdf": bsdf}
+    if interior is not None:
+        shape["interior"] = interior
+    return mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": "volpath", "max_depth": -1, "rr_depth": 100_000},
+        "sensor": {"type": "perspective", "fov": cam.fov_degrees, "fov_axis": "y",
+                   "to_world": mi.ScalarTransform4f().look_at(origin=list(cam.position), target=list(cam.look_at),
+                                                               up=list(cam.up)),
+                   "film": {"type": "hdrfilm", "width": cam.width, "height": cam.height,
+                            "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+                   "sampler": {"type": "independent"}},
+        "object": shape, **lights})
+
+
+def _render(mi, mscene, spp, seed):
+    return np.array(mi.render(mscene, spp=spp, seed=seed), dtype=float)[..., :3]
+
+
+def _medium(mi, medium, absorbing=False):
+    sigma_a = np.asarray(medium.sigma_a, float) * np.ones(3)
+    sigma_s = np.asarray(medium.sigma_s_prime, float) * np.ones(3)
+    sigma_t = sigma_a + sigma_s
+    scale = float(sigma_t.max())
+    albedo = np.zeros(3) if absorbing else sigma_s / sigma_t
+    return {"type": "homogeneous", "albedo": {"type": "rgb", "value": albedo.tolist()},
+            "sigma_t": {"type": "rgb", "value": (sigma_t / scale).tolist()}, "scale": scale}
+
+
+def lambert_check(mi, scene, ply, spp):
+    """Relative difference of a white Lambertian object, Mitsuba against jsss's own irradiance."""
+    buffers = camera_buffers(scene.mesh, scene.camera)
+    L = 0.0
+    for light in scene.lights:
+        g = light_geometry(buffers.position, buffers.normal, buffers.mask, light,
+                           shadow_map(scene.mesh, light, size=scene.shadow_map_size))
+        L = L + (np.clip(g.cosine, 0, None) * g.falloff * g.visible)[..., None] * np.asarray(light.color) * light.intensity
+    ours = L / np.pi * buffers.mask[..., None]
+    white = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}
+    truth = _render(mi, _mitsuba_scene(mi, scene, ply, white), spp, 0)
+    inner = _interior(buffers.mask)
+    return ours[inner].sum(0) / truth[inner].sum(0) - 1, inner
+
+
+def _interior(mask):
+    """Pixels whose 8 neighbours are on the object too (silhouette pixels are partly background)."""
+    m = mask.astype(bool)
+    out = m.copy()
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            out &= np.roll(np.roll(m, dy, 0), dx, 1)
+    return out
+
+
+def subsurface_truth(mi, scene, ply, spp, chunks):
+    """Smooth-limit subsurface radiance (H, W, 3) and each chunk's estimate (for the noise)."""
+    eta = float(np.asarray(scene.material.eta).mean())
+    per_chunk = []
+    for seed in range(chunks):
+        at = []
+        for alpha in ROUGHNESS:
+            bsdf = {"type": "roughdielectric", "distribution": "beckmann", "alpha": alpha,
+                    "int_ior": eta, "ext_ior": 1.0}
+            full = _render(mi, _mitsuba_scene(mi, scene, ply, bsdf, _medium(mi, scene.material.medium)), spp, seed)
+            dark = _render(mi, _mitsuba_scene(mi, scene, ply, bsdf, _medium(mi, scene.material.medium, True)),
+                           spp, seed)
+            at.append(full - dark)
+        a2 = np.square(ROUGHNESS)
+        per_chunk.append(at[0] + (at[0] - at[1]) * a2[0] / (a2[1] - a2[0]))  # linear in alpha^2, at 0
+    return np.mean(per_chunk, 0), per_chunk
+
+
+def _ours(scene, method, samples=128):
+    plan = plan_scene(scene, method=method, samples=samples if method == "image-space" else None)
+    plan = plan.replace("specular", False, "subsurface only")
+    return render(scene, plan, dtype=jnp.float64).radiance, plan.on("single scattering")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="40 x 30 pixels, 2 chunks")
+    parser.add_argument("--spp", type=int, default=32, help="path-tracer samples per pixel per chunk")
+    parser.add_argument("--scenes", nargs="*", default=["marble_sphere", "ketchup_plane"])
+    args = parser.parse_args(argv)
+    mi = _mitsuba()
+    width, height, chunks = (40, 30, 2) if args.quick else (80, 60, 4)
+    print(f"transport truth: Mitsuba {mi.__version__} scalar_rgb volpath, {width}x{height}, "
+          f"{chunks} chunks x {args.spp} spp, roughness {ROUGHNESS} -> 0 (in alpha^2), {time.strftime('%Y-%m-%d')}")
+    with tempfile.TemporaryDirectory() as folder:
+        for name in args.scenes:
+            scene = _with_resolution(load_scene(os.path.join(EXAMPLES, f"{name}.toml")), width, height)
+            ply = _mesh_file(scene, folder)
+            t0 = time.perf_counter()
+            lam, inner = lambert_check(mi, scene, ply, 4 * args.spp)
+            print(f"\n## {name}: white Lambertian jsss / Mitsuba - 1 = "
+                  + " / ".join(f"{100 * x:+.2f} %" for x in lam))
+            truth, chunk = subsurface_truth(mi, scene, ply, args.spp, chunks)
+            ratios = np.array([c[inner].sum(0) / truth[inner].sum(0) for c in chunk])
+            noise = ratios.std(0, ddof=1) / np.sqrt(chunks)
+            print(f"path tracer: {time.perf_counter() - t0:.0f} s; its own noise on the sums "
+                  + " / ".join(f"{100 * x:.1f} %" for x in noise))
+            print("| method | single scattering | ratio R | ratio G | ratio B | rel. RMS R | G | B |")
+            print("|---|---|---:|---:|---:|---:|---:|---:|")
+            for method in ("lambert", "normal filtering", "image-space", "texture-space"):
+                ours, single = _ours(scene, method)
+                ratio = ours[inner].sum(0) / truth[inner].sum(0)
+                # The path tracer's own per-pixel variance (from the chunks) is taken out of the
+                # mean square, so the RMS measures jsss's error, not Mitsuba's noise.
+                noise_var = np.var(np.array(chunk), axis=0, ddof=1)[inner].mean(0) / chunks
+                mse = np.maximum(((ours - truth)[inner] ** 2).mean(0) - noise_var, 0.0)
+                rms = np.sqrt(mse) / np.sqrt(np.maximum((truth[inner] ** 2).mean(0) - noise_var, 1e-300))
+                print(f"| {method} | {'on' if single else 'off'} | " + " | ".join(f"{r:.3f}" for r in ratio) + " | "
+                      + " | ".join(f"{100 * e:.1f} %" for e in rms) + " |")
+
+
+if __name__ == "__main__":
+    main()
