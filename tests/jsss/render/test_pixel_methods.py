@@ -21,6 +21,7 @@ def _cache(tmp_path, monkeypatch):
 
 def _diffuse(scene, method, **knobs):
     plan = plan_scene(scene, method=method, **knobs).replace("specular", False, "test: diffuse only")
+    plan = plan.replace("single scattering", False, "test: diffusion only")
     return render(scene, plan, dtype=jnp.float64).radiance
 
 
