@@ -38,7 +38,6 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -299,7 +298,6 @@ def single_scattering_share(medium) -> np.ndarray:
     Both per unit flux arriving: :func:`jsss.single_scattering.single_scattering_albedo` over
     the dipole's total times the entry transmittance.
     """
-    medium = jax.tree_util.tree_map(lambda a: np.asarray(a, float), medium)  # NumPy float64, whatever JAX's default
     single = np.asarray(single_scattering_albedo(medium, jnp.asarray(1.0)))
     diffusion = np.asarray(total_reflectance(medium) * fresnel_transmittance(jnp.asarray(1.0), medium.eta))
     return single / np.maximum(diffusion, 1e-300)

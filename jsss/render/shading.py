@@ -31,8 +31,7 @@ import numpy as np
 from ..fresnel import diffuse_fresnel_transmittance, fresnel_reflectance, fresnel_transmittance
 from ..single_scattering import single_scattering_albedo, single_scattering_brdf_from_cosines
 
-__all__ = ["diffuse_radiance", "single_scattering_exitance", "single_scattering_radiance", "specular_radiance",
-           "surface_radiance", "tone_map"]
+__all__ = ["diffuse_radiance", "single_scattering", "specular_radiance", "surface_radiance", "tone_map"]
 
 
 def diffuse_radiance(exitance, cos_view, eta):
@@ -46,60 +45,49 @@ def diffuse_radiance(exitance, cos_view, eta):
     return exitance * fresnel_transmittance(cos, eta) / norm
 
 
-def single_scattering_radiance(medium, normals, view_dirs, light_geometry, radiant):
-    r"""Single-scattered radiance (..., C): Jensen 2001 sec. 2.2 under a locally flat surface.
+def single_scattering(medium, normals, view_dirs, light_geometry, radiant):
+    r"""Single-scattered radiance toward the eye and exitance (both (..., C)), summed over lights.
 
-    .. math:: L^{(1)} = \sum_l f_r^{(1)}(\omega_l, \omega_o)\,I_l\,c_l\cos\theta_l\,V_l / d_l^p,
+    Jensen 2001 sec. 2.2 under a locally flat surface:
 
-    with the single-scattering BRDF of :mod:`jsss.single_scattering` (HG with ``g = 0`` on
-    the reduced coefficients, the model the dipole's medium is given in). It leaves within a
-    mean free path of where light entered, so it is evaluated at the pixel's own point.
+    .. math:: L^{(1)} = \sum_l f_r^{(1)}(\omega_l, \omega_o)\,E_l, \qquad
+              M^{(1)} = \sum_l \rho^{(1)}(\theta_l)\,E_l, \qquad
+              E_l = I_l\,c_l\cos\theta_l\,V_l / d_l^p,
+
+    with the single-scattering BRDF :math:`f_r^{(1)}` and its hemispherical albedo
+    :math:`\rho^{(1)}` of :mod:`jsss.single_scattering` (HG with ``g = 0`` on the reduced
+    coefficients, the model the dipole's medium is given in). It leaves within a mean free
+    path of where light entered, so both are evaluated at the pixel's own point.
     """
     n = jnp.asarray(normals, radiant.dtype)
     v = jnp.asarray(view_dirs, radiant.dtype)
     cos_o = jnp.clip((n * v).sum(-1), 0.0, 1.0)
-    total = 0.0
+    radiance, exitance = 0.0, 0.0
     for i, g in enumerate(light_geometry):
         to_light = jnp.asarray(g.to_light, radiant.dtype)
         cos_i = jnp.clip((n * to_light).sum(-1), 0.0, 1.0)
+        arriving = (cos_i * jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None] * radiant[i]
         tangential = (to_light * v).sum(-1) - cos_i * cos_o
-        f = single_scattering_brdf_from_cosines(medium, cos_i, cos_o, tangential)
-        irr = (cos_i * jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None] * radiant[i]
-        total = total + f * irr
-    return total
-
-
-def single_scattering_exitance(medium, normals, light_geometry, radiant):
-    """Flux per area (..., C) that single scattering returns at each point: the share of the
-    diffusion exitance that :func:`single_scattering_radiance` spreads with its own angular law.
-
-    The dipole's source already holds every order of scattering (with ``sigma_a = 0`` its total
-    is 1), so single scattering *replaces* its share of the diffusion light instead of adding
-    to it: adding would return 1.07 times the light that entered at albedo 0.999, eta = 1.
-    """
-    n = jnp.asarray(normals, radiant.dtype)
-    total = 0.0
-    for i, g in enumerate(light_geometry):
-        cos_i = jnp.clip((n * jnp.asarray(g.to_light, radiant.dtype)).sum(-1), 0.0, 1.0)
-        albedo = single_scattering_albedo(medium, cos_i, nodes=16)
-        total = total + albedo * (cos_i * jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None] * radiant[i]
-    return total
+        radiance = radiance + single_scattering_brdf_from_cosines(medium, cos_i, cos_o, tangential) * arriving
+        exitance = exitance + single_scattering_albedo(medium, cos_i, nodes=16) * arriving
+    return radiance, exitance
 
 
 def surface_radiance(exitance, cos_view, eta, *, medium=None, normals=None, view_dirs=None, light_geometry=(),
                      radiant=None):
     """Diffuse radiance of ``exitance``; with ``medium`` given, single scattering takes its share.
 
+    The dipole's source already holds every order of scattering (with ``sigma_a = 0`` its total
+    is 1), so single scattering *replaces* its share of the diffusion light instead of adding
+    to it: adding would return 1.07 times the light that entered at albedo 0.999, eta = 1.
     The diffusion exitance keeps what single scattering does not return (never below zero),
-    spread by :func:`diffuse_radiance`, plus :func:`single_scattering_radiance`: the frame's
-    total flux is the diffusion model's, its angular law exact for the first bounce.
+    spread by :func:`diffuse_radiance`, plus the single-scattered radiance: the frame's total
+    flux is the diffusion model's, its angular law exact for the first bounce.
     """
     if medium is None:
         return diffuse_radiance(exitance, cos_view, eta)
-    single = single_scattering_exitance(medium, normals, light_geometry, radiant)
-    rest = jnp.maximum(exitance - single, 0.0)
-    return diffuse_radiance(rest, cos_view, eta) + single_scattering_radiance(medium, normals, view_dirs,
-                                                                             light_geometry, radiant)
+    single_radiance, single_exitance = single_scattering(medium, normals, view_dirs, light_geometry, radiant)
+    return diffuse_radiance(jnp.maximum(exitance - single_exitance, 0.0), cos_view, eta) + single_radiance
 
 
 def specular_radiance(normals, view_dirs, light_geometry, radiant, eta, *, roughness, weight):

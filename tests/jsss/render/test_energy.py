@@ -44,7 +44,7 @@ def _hemisphere_rule(eta):
     return w / (1 - fresnel_reflectance_numpy(VIEW_COSINES, eta))
 
 
-def _plane_scene(material, view_cosine, *, samples_px=24):
+def _plane_scene(material, view_cosine, *, pixels=24):
     theta = np.arccos(view_cosine)
     distance = 200.0
     light = [0.0, -np.sin(np.radians(30.0)), -LIGHT_COSINE]  # travels down, tilted 30 degrees
@@ -54,7 +54,7 @@ def _plane_scene(material, view_cosine, *, samples_px=24):
         "lights": [{"type": "directional", "direction": light}],
         "camera": {"position": [distance * np.sin(theta), 0.0, distance * np.cos(theta)],
                    "look_at": [0.0, 0.0, 0.0], "up": [0.0, 0.0, 1.0] if view_cosine < 1 else [0.0, 1.0, 0.0],
-                   "fov": 6, "resolution": [samples_px, samples_px]},
+                   "fov": 6, "resolution": [pixels, pixels]},
         "render": {"texture_size": 256, "accuracy": 0.05},
     })
 
