@@ -17,7 +17,7 @@ import numpy as np
 
 from .fresnel import fresnel_transmittance, refracted_cosine
 from .medium import Medium
-from .numerics import append_axes, as_float_array, is_concrete
+from .numerics import append_axes, as_float_array, is_concrete, safe_sqrt
 
 __all__ = [
     "henyey_greenstein",
@@ -157,12 +157,11 @@ def single_scattering_albedo(medium: Medium, cos_incident=1.0, *, g=0.0, nodes: 
     weights = jnp.asarray(w / 2, cos_incident.dtype)
     n_phi = 1 if g == 0 else 32
     phi = jnp.asarray((np.arange(n_phi) + 0.5) * 2 * np.pi / n_phi, cos_incident.dtype)
-    sin_i = jnp.sqrt(jnp.clip(1 - cos_incident**2, 0.0, 1.0))[..., None, None]
+    sin_i = safe_sqrt(jnp.clip(1 - cos_incident**2, 0.0, 1.0))[..., None, None]
     sin_o = jnp.sqrt(1 - mu**2)[:, None]
-    omega_i = jnp.stack(jnp.broadcast_arrays(sin_i, jnp.zeros_like(sin_i), cos_incident[..., None, None]), -1)
-    omega_o = jnp.stack(jnp.broadcast_arrays(sin_o * jnp.cos(phi), sin_o * jnp.sin(phi), mu[:, None]), -1)
-    omega_i, omega_o = jnp.broadcast_arrays(omega_i, omega_o)
-    f = single_scattering_brdf(medium, omega_i, omega_o, g=g)  # (..., nodes, n_phi) + C
+    # Directions (sin_i, 0, cos_i) and (sin_o cos phi, sin_o sin phi, mu): tangential dot sin_i sin_o cos phi.
+    f = single_scattering_brdf_from_cosines(medium, cos_incident[..., None, None], mu[:, None],
+                                            sin_i * sin_o * jnp.cos(phi), g=g)  # (..., nodes, n_phi) + C
     n = len(medium.shape)
     quad = append_axes(mu * weights, n)[:, None] * (2 * jnp.pi / n_phi)
     return (f * quad).sum((-2 - n, -1 - n))
