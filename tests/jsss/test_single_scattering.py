@@ -124,3 +124,13 @@ def test_single_scattering_albedo_is_the_hemispherical_integral_at_oblique_incid
 
     expected = dblquad(integrand, 0, 2 * np.pi, 0, np.pi / 2, epsabs=1e-10)[0]
     assert float(single_scattering_albedo(medium, np.cos(theta_i), g=0.4)) == pytest.approx(expected, rel=1e-4)
+
+
+def test_single_scattering_albedo_gradients_are_finite_at_normal_incidence_and_zero_absorption():
+    """d/dcos at cos = 1 (a square root of 1 - cos^2 there) and d/dsigma_a at 0 against differences."""
+    d_cos = jax.grad(lambda c: single_scattering_albedo(Medium(0.1, 0.9, 1.4), c))(1.0)
+    assert np.isfinite(float(d_cos))
+    d_sa = float(jax.grad(lambda a: single_scattering_albedo(Medium(a, 0.9, 1.4)))(0.0))
+    h = 1e-6
+    fd = (float(single_scattering_albedo(Medium(h, 0.9, 1.4))) - float(single_scattering_albedo(Medium(0.0, 0.9, 1.4)))) / h
+    assert d_sa == pytest.approx(fd, rel=1e-4)
