@@ -1,0 +1,281 @@
+r"""The photon random walk engine: one collision per lane per step, finished lanes refilled.
+
+GPU Monte Carlo codes keep every lane busy: when a photon leaves, is absorbed or reaches
+its cap, its lane starts the next photon at once. A ``vmap`` of one ``while_loop`` per
+photon instead runs every lane until the batch's longest walk ends; at albedo 0.999 that
+wasted 95-99 % of the work (issue 18). Here the state of ``lanes`` photons advances one
+event (a free flight ending in a collision or at a boundary) per step; a finished photon's
+record is written at its photon index and the lane takes the next index. Runs advance in
+jitted chunks of steps, so Python sees progress between them and, once every photon has
+been issued, moves the survivors into fewer lanes (fewer wasted steps while the longest
+walks drain).
+
+Random numbers are counter-based: event ``k`` of photon ``i`` draws its four uniforms from
+two Threefry-2x32 blocks keyed by the seed with counters ``(i, 2k)`` and ``(i, 2k + 1)``
+(the generator behind ``jax.random``, checked against Random123's answers). A photon's path therefore depends only on the seed and
+its index, not on the lane count or the order in which lanes finish: a seed reproduces a
+run bit for bit whatever ``lanes`` is.
+
+The physics (per event): free path :math:`s = -\ln(1-u)/\sigma_t` in the photon's layer;
+if the boundary is nearer, the photon moves to it and is reflected with the exact Fresnel
+probability for its angle (total internal reflection included) or crosses (Snell) into the
+next layer or leaves the stack. Otherwise it collides: its weight is multiplied by the
+albedo :math:`\sigma_s/\sigma_t` (absorption by weight), it scatters by Henyey-Greenstein,
+and below weight 1e-4 Russian roulette keeps one photon in ten at ten times the weight.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .fresnel import fresnel_reflectance
+
+__all__ = ["WalkRecords", "run_walk", "sample_henyey_greenstein"]
+
+# Record columns, one row per photon.
+_RADIUS, _WEIGHT, _SIDE, _PATH, _EXIT_COS, _PHOTON, _COLUMNS = 0, 1, 2, 3, 4, 5, 6
+
+
+class WalkRecords(NamedTuple):
+    """One row per photon, in photon-index order.
+
+    ``radius`` [mm] where it left (0 if it did not); ``weight`` it carried out (0 if it did
+    not leave); ``side``: 0 still walking at the cap (lost), 1 left through the top, 2 left
+    through the bottom after scattering, 3 absorbed (roulette), 4 left through the bottom
+    without a collision; ``path`` [mm] the total length travelled inside; ``exit_cos`` the
+    cosine of its direction to the normal *outside*, after refraction (0 if it did not leave).
+    """
+
+    radius: np.ndarray
+    weight: np.ndarray
+    side: np.ndarray
+    path: np.ndarray
+    exit_cos: np.ndarray
+    seconds: float
+    steps: int
+
+
+def sample_henyey_greenstein(g, xi):
+    r"""Cosine of the scattering angle from the HG distribution (inverse CDF); ``g = 0`` isotropic."""
+    small = jnp.abs(g) < 1e-6
+    safe_g = jnp.where(small, 0.5, g)
+    frac = (1 - safe_g**2) / (1 - safe_g + 2 * safe_g * xi)
+    cos_hg = (1 + safe_g**2 - frac**2) / (2 * safe_g)
+    return jnp.clip(jnp.where(small, 2 * xi - 1, cos_hg), -1.0, 1.0)
+
+
+def _scatter(direction, cos_theta, phi):
+    """Rotate ``direction`` by polar angle acos(cos_theta) and azimuth phi."""
+    ux, uy, uz = direction
+    sin_theta = jnp.sqrt(jnp.maximum(1 - cos_theta**2, 0.0))
+    cos_phi, sin_phi = jnp.cos(phi), jnp.sin(phi)
+    near_pole = jnp.abs(uz) > 0.99999
+    denom = jnp.sqrt(jnp.maximum(1 - uz**2, 1e-300))
+    nx = sin_theta * (ux * uz * cos_phi - uy * sin_phi) / denom + ux * cos_theta
+    ny = sin_theta * (uy * uz * cos_phi + ux * sin_phi) / denom + uy * cos_theta
+    nz = -sin_theta * cos_phi * denom + uz * cos_theta
+    px, py, pz = sin_theta * cos_phi, sin_theta * sin_phi, jnp.sign(uz) * cos_theta
+    return jnp.where(near_pole, jnp.stack([px, py, pz]), jnp.stack([nx, ny, nz]))
+
+
+class _Lane(NamedTuple):
+    pos: jax.Array        # (3,)
+    direction: jax.Array  # (3,)
+    weight: jax.Array
+    side: jax.Array       # int32, as in WalkRecords
+    exit_r: jax.Array
+    exit_cos: jax.Array
+    path: jax.Array
+    steps: jax.Array      # int32 events so far
+    collided: jax.Array   # bool
+    layer: jax.Array      # int32
+    photon: jax.Array     # int32 photon index; == n_photons: idle lane
+
+
+def _fresh(photon, dtype):
+    zero = jnp.zeros((), dtype)
+    return _Lane(jnp.zeros(3, dtype), jnp.array([0.0, 0.0, 1.0], dtype), jnp.ones((), dtype), jnp.int32(0), zero,
+                 zero, zero, jnp.int32(0), jnp.bool_(False), jnp.int32(0), photon)
+
+
+_ROTATIONS = (13, 15, 26, 6, 17, 29, 16, 24)
+
+
+def threefry_2x32(key, counter):
+    """Threefry-2x32 with 20 rounds (Salmon et al. 2011, Random123): 64 random bits per counter.
+
+    ``key`` and ``counter`` are pairs of uint32 arrays (broadcastable). Written out here so a
+    photon's numbers come from one block per pair of words, keyed by (photon, event), with no
+    key splitting per event.
+    """
+    k0, k1 = (jnp.asarray(k, jnp.uint32) for k in key)
+    ks = (k0, k1, k0 ^ k1 ^ jnp.uint32(0x1BD11BDA))
+    x0 = jnp.asarray(counter[0], jnp.uint32) + k0
+    x1 = jnp.asarray(counter[1], jnp.uint32) + k1
+    for group in range(5):
+        for r in _ROTATIONS[4 * (group % 2): 4 * (group % 2) + 4]:
+            x0 = x0 + x1
+            x1 = (x1 << jnp.uint32(r)) | (x1 >> jnp.uint32(32 - r))
+            x1 = x1 ^ x0
+        x0 = x0 + ks[(group + 1) % 3]
+        x1 = x1 + ks[(group + 2) % 3] + jnp.uint32(group + 1)
+    return x0, x1
+
+
+def _event(lane: _Lane, key, params) -> _Lane:
+    """Advance one lane by one event (a collision or a boundary)."""
+    sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below = params
+    n_layers = sigma_t.shape[0]
+    pos, direction, layer = lane.pos, lane.direction, lane.layer
+    dtype = pos.dtype
+    photon, event = lane.photon.astype(jnp.uint32), 2 * lane.steps.astype(jnp.uint32)
+    bits = jnp.stack(threefry_2x32(key, (photon, event)) + threefry_2x32(key, (photon, event + 1)))
+    # Uniforms in (0, 1) from 32 bits: a free path is cut at -ln(2^-33) = 23 mean free paths
+    # (probability e^-23), far below any tally's noise. A boundary hit uses u_turn for
+    # Fresnel; a collision uses it for the scattering angle (the two never meet in one event).
+    u_path, u_turn, u_phi, u_roulette = (bits.astype(dtype) + 0.5) * (2.0**-32)
+    u_fresnel = u_theta = u_turn
+    s = -jnp.log(u_path) / sigma_t[layer]
+    dz = direction[2]
+    to_top = jnp.where(dz < 0, (pos[2] - tops[layer]) / jnp.where(dz < 0, -dz, 1.0), jnp.inf)
+    to_bottom = jnp.where(dz > 0, (bottoms[layer] - pos[2]) / jnp.where(dz > 0, dz, 1.0), jnp.inf)
+    to_boundary = jnp.minimum(to_top, to_bottom)
+    hits = s >= to_boundary
+    up = to_top <= to_bottom
+    step = jnp.where(hits, to_boundary, s)
+    new_pos = pos + direction * step
+    new_pos = new_pos.at[2].set(jnp.where(hits, jnp.where(up, tops[layer], bottoms[layer]), new_pos[2]))
+    # Boundary: Fresnel reflection or transmission (with refraction into the next layer).
+    neighbour = jnp.where(up, layer - 1, layer + 1)
+    outside = (neighbour < 0) | (neighbour >= n_layers)
+    n1 = index[layer]
+    n2 = jnp.where(neighbour < 0, eta_above,
+                   jnp.where(neighbour >= n_layers, eta_below, index[jnp.clip(neighbour, 0, n_layers - 1)]))
+    reflects = u_fresnel < fresnel_reflectance(jnp.abs(dz), n2 / n1)
+    leaves = hits & ~reflects & outside
+    crosses = hits & ~reflects & ~outside
+    ratio = n1 / n2
+    cos_t = jnp.sqrt(jnp.maximum(1 - ratio**2 * (1 - dz**2), 0.0))
+    refracted = jnp.stack([direction[0] * ratio, direction[1] * ratio, jnp.sign(dz) * cos_t])
+    mirrored = direction * jnp.array([1.0, 1.0, -1.0], dtype)
+    # Collision: absorb by weight, scatter by HG, roulette below 1e-4.
+    scattered = _scatter(direction, sample_henyey_greenstein(g[layer], u_theta), 2 * jnp.pi * u_phi)
+    collided_weight = lane.weight * albedo[layer]
+    low = collided_weight < 1e-4
+    collided_weight = jnp.where(low, jnp.where(u_roulette < 0.1, collided_weight * 10, 0.0), collided_weight)
+    new_direction = jnp.where(hits, jnp.where(reflects, mirrored, jnp.where(crosses, refracted, direction)),
+                              scattered)
+    new_weight = jnp.where(hits, lane.weight, collided_weight)
+    side = jnp.where(leaves, jnp.where(up, 1, 2), jnp.where(new_weight == 0, 3, 0)).astype(jnp.int32)
+    return _Lane(new_pos, new_direction, new_weight, side,
+                 jnp.where(leaves, jnp.hypot(new_pos[0], new_pos[1]), lane.exit_r),
+                 jnp.where(leaves, cos_t, lane.exit_cos), lane.path + step, lane.steps + 1,
+                 lane.collided | ~hits, jnp.where(crosses, neighbour, layer), lane.photon)
+
+
+def _record(lane: _Lane):
+    side = jnp.where((lane.side == 2) & ~lane.collided, 4, lane.side)
+    left = (side == 1) | (side == 2) | (side == 4)
+    dtype = lane.weight.dtype
+    return jnp.stack([lane.exit_r, jnp.where(left, lane.weight, 0.0), side.astype(dtype), lane.path,
+                      jnp.where(left, lane.exit_cos, 0.0), lane.photon.astype(dtype)])
+
+
+_CHUNK = 64  # refills per jitted call: progress and the survivor compaction happen between calls
+_EVENTS_PER_REFILL = 4
+_CAPACITY = 1 << 16  # rows of records one call may return
+
+
+@jax.jit
+def _advance(lanes: _Lane, next_id, issue_limit, n_photons, key, params, max_steps, max_path):
+    """Advance every lane by ``_CHUNK`` refills of up to ``_EVENTS_PER_REFILL`` events each;
+    finished photons are appended to ``records``.
+
+    A lane whose photon finished, and an idle lane (photon index ``n_photons``), takes the
+    next index below ``issue_limit``. The caller keeps ``issue_limit - next_id + lanes <=
+    _CAPACITY``, so every photon that can finish during the call has a row. Everything that
+    varies between runs is an argument, not a captured constant: one compilation per lane
+    count serves every medium, seed and run size.
+    """
+    dtype = params[0].dtype
+
+    def one_step(_, carry):
+        lanes, records, count, next_id = carry
+        active = lanes.photon < n_photons
+
+        def event(_, lanes):
+            walking = (lanes.photon < n_photons) & (lanes.side == 0) & (lanes.steps < max_steps) & (
+                lanes.path < max_path)
+            moved = jax.vmap(_event, in_axes=(0, None, None))(lanes, key, params)
+            return jax.tree.map(lambda new, old: jnp.where(walking.reshape((-1,) + (1,) * (new.ndim - 1)), new, old),
+                                moved, lanes)
+
+        # A few events between refills: recording and refilling cost as much as an event.
+        moved = jax.lax.fori_loop(0, _EVENTS_PER_REFILL, event, lanes, unroll=False)
+        finished = active & ((moved.side != 0) | (moved.steps >= max_steps) | (moved.path >= max_path))
+        slot = count + jnp.cumsum(finished, dtype=jnp.int32) - 1
+        records = records.at[jnp.where(finished, slot, _CAPACITY)].set(jax.vmap(_record)(moved), mode="drop")
+        count = count + jnp.sum(finished, dtype=jnp.int32)
+        wants = finished | ~active
+        issued = next_id + jnp.cumsum(wants, dtype=jnp.int32) - 1
+        new_photon = jnp.where(issued < issue_limit, issued, n_photons)
+        fresh = jax.vmap(_fresh, in_axes=(0, None))(new_photon, dtype)
+        lanes = jax.tree.map(lambda f, m: jnp.where(wants.reshape((-1,) + (1,) * (f.ndim - 1)), f, m), fresh, moved)
+        next_id = jnp.minimum(next_id + jnp.sum(wants, dtype=jnp.int32), issue_limit)
+        return lanes, records, count, next_id
+
+    records = jnp.zeros((_CAPACITY, _COLUMNS), dtype)
+    lanes, records, count, next_id = jax.lax.fori_loop(0, _CHUNK, one_step, (lanes, records, jnp.int32(0), next_id))
+    return lanes, records, count, next_id, jnp.sum(lanes.photon < n_photons, dtype=jnp.int32)
+
+
+def run_walk(params, *, n_photons: int, lanes: int = 4096, max_steps: int = 2000, max_path=np.inf, seed: int = 0,
+             progress: bool | None = None, label: str = "random_walk") -> WalkRecords:
+    """Walk ``n_photons`` photons through the stack described by ``params``; one record each.
+
+    ``params`` = (sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below), per layer
+    arrays of one dtype (see :mod:`jsss.montecarlo`). A photon still inside after
+    ``max_steps`` events or ``max_path`` [mm] of path is recorded as lost (side 0). Progress
+    is printed to stderr when ``progress`` (default: runs of more than 64 photons per lane).
+    """
+    dtype = params[0].dtype
+    n_photons = int(n_photons)
+    if n_photons >= 2**31 - 1:
+        raise ValueError(f"run_walk(n_photons=...) must be below 2**31 - 1; got {n_photons}. Run several seeds.")
+    lanes = int(max(1, min(lanes, n_photons, _CAPACITY // 2)))
+    key = (jnp.uint32(seed & 0xFFFFFFFF), jnp.uint32((seed >> 32) & 0xFFFFFFFF))
+    count = jnp.int32(n_photons)
+    max_steps, max_path = jnp.int32(max_steps), jnp.asarray(max_path, dtype)
+    shown = progress if progress is not None else n_photons > 64 * lanes
+    state = jax.vmap(_fresh, in_axes=(0, None))(jnp.full(lanes, n_photons, jnp.int32), dtype)  # all idle
+    next_id, issued, done = jnp.int32(0), 0, 0
+    start, steps, chunks = time.perf_counter(), 0, []
+    while True:
+        width = state.photon.shape[0]
+        limit = min(n_photons, issued + _CAPACITY - width)
+        state, records, finished, next_id, active = _advance(state, next_id, jnp.int32(limit), count, key, params,
+                                                             max_steps, max_path)
+        steps += _CHUNK * _EVENTS_PER_REFILL
+        finished, issued, active = int(finished), int(next_id), int(active)
+        chunks.append(np.asarray(records[:finished]))
+        done += finished
+        if shown:
+            print(f"\r{label}: {done}/{n_photons} photons", end="", file=sys.stderr, flush=True)
+        if done >= n_photons:
+            break
+        # Every photon issued: move the survivors into fewer lanes so the drain costs less.
+        if issued >= n_photons and width >= 64 and active <= width // 8:
+            order = jnp.argsort(state.photon >= n_photons, stable=True)[: width // 4]
+            state = jax.tree.map(lambda x: x[order], state)
+    if shown:
+        print(file=sys.stderr)
+    records = np.concatenate(chunks)
+    records = records[np.argsort(records[:, _PHOTON], kind="stable")]
+    return WalkRecords(records[:, _RADIUS], records[:, _WEIGHT], records[:, _SIDE].astype(np.int32),
+                       records[:, _PATH], records[:, _EXIT_COS], time.perf_counter() - start, steps)
