@@ -14,8 +14,10 @@ The forward model is a parameter. ``"dipole"`` is the dipole profile convolved w
 Gaussian beam (of standard deviation ``beam_sigma`` mm, from the reference image) through
 the exact dipole spectrum and one inverse Hankel transform, and averaged over the same pixels
 as each bin, so the finite beam and the binning do not bias the fit. The dipole itself is
-biased near the source on real materials (diffusion theory); more accurate models will be
-added behind the same ``model=`` switch.
+biased near the source on real materials (diffusion theory). ``"transport"`` is
+:func:`jsss.transport.profile`, exact to radiative transfer up to its tables' Monte Carlo
+noise (g given by the caller), taken to the same spectrum by the grid's forward Hankel
+transform; everything after the spectrum is shared.
 """
 
 from __future__ import annotations
@@ -28,13 +30,13 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from jsss import dipole, hankel
+from jsss import dipole, hankel, transport
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
 
 __all__ = ["MODELS", "MediumFit", "fit_medium"]
 
-MODELS = ("dipole",)
+MODELS = ("dipole", "transport")
 
 
 class MediumFit(eqx.Module):
@@ -79,18 +81,26 @@ def _interpolation_rows(grid_r, radii, rows, n_rows, scale):
     return matrix
 
 
+def _spectrum_and_total(model, g, medium, k, grid_r, forward_matrix):
+    """The profile's Hankel spectrum on ``k`` and its whole-plane total, for ``model``."""
+    if model == "transport":
+        return forward_matrix @ transport.profile(medium, grid_r, g=g), transport.total_reflectance(medium, g=g)
+    return dipole.spectrum(medium, k), dipole.total_reflectance(medium)
+
+
 def _model(params, args):
     """Bin means of the beam-convolved model and the model's total over the field of view.
 
-    Everything between the closed-form spectrum and the bins is linear and fixed for one
-    measurement (inverse Hankel transform, interpolation to each pixel, averaging over the
-    bin), so it is one precomputed matrix: the model costs a spectrum and a mat-vec.
+    Everything between the spectrum and the bins is linear and fixed for one measurement
+    (inverse Hankel transform, interpolation to each pixel, averaging over the bin), so it is
+    one precomputed matrix: the model costs a spectrum and a mat-vec.
     """
     log_sa, log_ss = params
-    eta, k, beam_sigma, bins_from_spectrum, total_from_spectrum = args
+    (model, g), eta, k, grid_r, forward_matrix, beam_sigma, bins_from_spectrum, total_from_spectrum = args
     medium = Medium(jnp.exp(log_sa), jnp.exp(log_ss), eta)
-    spectrum = dipole.spectrum(medium, k) * jnp.exp(-(k**2) * beam_sigma**2 / 2)
-    total = dipole.total_reflectance(medium) if total_from_spectrum is None else total_from_spectrum @ spectrum
+    spectrum, plane_total = _spectrum_and_total(model, g, medium, k, grid_r, forward_matrix)
+    spectrum = spectrum * jnp.exp(-(k**2) * beam_sigma**2 / 2)
+    total = plane_total if total_from_spectrum is None else total_from_spectrum @ spectrum
     return bins_from_spectrum @ spectrum, total
 
 
@@ -103,16 +113,17 @@ def _residuals(params, args):
     return jnp.concatenate([profile_part, total_part[None]])
 
 
-@partial(jax.jit, static_argnames=("max_steps",))
-def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, k, beam_sigma, bins_from_spectrum,
-                  total_from_spectrum, starts, *, max_steps, rtol, atol):
+@partial(jax.jit, static_argnames=("max_steps", "model"))
+def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, k, grid_r, forward_matrix, beam_sigma,
+                  bins_from_spectrum, total_from_spectrum, starts, *, max_steps, rtol, atol, model):
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
     def one(meas, err, total, total_err, scale_err, eta_c, start_set):
         usable = (meas > 0) & (err > 0)
         inv_rel_err = jnp.where(usable, meas / jnp.where(usable, err, 1.0), 0.0)
         inv_total_err = jnp.where(total_err > 0, 1.0 / jnp.where(total_err > 0, total_err, 1.0), 0.0)
-        args = ((eta_c, k, beam_sigma, bins_from_spectrum, total_from_spectrum), meas, inv_rel_err, total, inv_total_err)
+        args = ((model, eta_c, k, grid_r, forward_matrix, beam_sigma, bins_from_spectrum, total_from_spectrum), meas,
+                inv_rel_err, total, inv_total_err)
 
         def solve(start):
             sol = optx.least_squares(_residuals, solver, start, args, max_steps=max_steps, throw=False)
@@ -136,7 +147,8 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, k, beam
         d_params_d_scale = -normal_inverse @ (jac.T @ d_res_d_scale)
         cov = cov + jnp.outer(d_params_d_scale, d_params_d_scale) * scale_err**2
         binned, _ = _model(params, args[0])
-        model_total = dipole.total_reflectance(Medium(jnp.exp(params[0]), jnp.exp(params[1]), eta_c))
+        model_total = _spectrum_and_total(*model, Medium(jnp.exp(params[0]), jnp.exp(params[1]), eta_c), k, grid_r,
+                                          forward_matrix)[1]
         rel = jnp.where(usable, binned / jnp.where(usable, meas, 1.0) - 1, 0.0)
         rel_rms = jnp.sqrt(jnp.sum(rel**2) / jnp.maximum(jnp.sum(usable), 1))
         sa, ss = jnp.exp(params[0]), jnp.exp(params[1])
@@ -157,7 +169,8 @@ def _starting_points(totals, eta, n_starts):
 
 def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectance=None, total_stderr=None,
                field_radii=None, pixel_area: float | None = None, scale_stderr=None,
-               beam_sigma: float = 0.0, model: str = "dipole", n_starts: int = 7, max_steps: int = 200,
+               beam_sigma: float = 0.0, model: str = "dipole", g: float = 0.0, n_starts: int = 7,
+               max_steps: int = 200,
                rtol: float = 1e-10, atol: float = 1e-12, grid: hankel.HankelGrid | None = None) -> MediumFit:
     """Fit sigma_a and sigma_s' per channel to binned radial profiles.
 
@@ -186,7 +199,11 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
         (the reference's sum); propagated into the parameters' errors.
     beam_sigma : float [mm], keyword-only
         Standard deviation of the Gaussian beam; 0 for a point beam.
-    model : {"dipole"}, keyword-only
+    model : {"dipole", "transport"}, keyword-only
+        The profile model (see the module docstring). ``"transport"`` needs eta in 1.0-1.6.
+    g : float, keyword-only
+        Henyey-Greenstein mean cosine of the material, for ``model="transport"`` (one of the
+        tabulated 0, 0.5, 0.8, 0.9); the dipole depends on sigma_s' only.
     n_starts : int, keyword-only
         Starting mean free paths (log-spaced from 0.01 to 10 mm).
     grid : HankelGrid, optional, keyword-only
@@ -199,6 +216,8 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
     """
     if model not in MODELS:
         raise ValueError(f"fit_medium(model={model!r}): valid models are {MODELS}.")
+    if model == "transport":
+        transport.profile(Medium(0.01, 1.0, jnp.asarray(eta)), 1.0, g=g)  # checks g and eta with a clear error
     measured = jnp.asarray(profile, dtype=jnp.result_type(float))
     warn_if_low_precision(measured, what="fit_medium", needs="its 1e-4 noise-free recovery (float64 fits)")
     if measured.ndim == 1:
@@ -233,7 +252,8 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
     scale_errs = jnp.broadcast_to(jnp.asarray(0.0 if scale_stderr is None else scale_stderr, measured.dtype),
                                   (n_channels,))
     out = _fit_channels(measured, errors, totals, total_errs, scale_errs, eta, jnp.asarray(grid.k, measured.dtype),
+                        jnp.asarray(grid.r, measured.dtype), jnp.asarray(grid.forward_matrix, measured.dtype),
                         jnp.asarray(beam_sigma, measured.dtype), bins_from_spectrum, total_from_spectrum,
-                        (log_sa, log_ss), max_steps=max_steps, rtol=rtol, atol=atol)
+                        (log_sa, log_ss), max_steps=max_steps, rtol=rtol, atol=atol, model=(model, float(g)))
     sa, ss, sa_err, ss_err, total, rel, chi2, steps, ok = out
     return MediumFit(Medium(sa, ss, eta), sa_err, ss_err, total, rel, chi2, steps, ok)

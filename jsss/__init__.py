@@ -2,7 +2,8 @@
 
 Public modules: :mod:`jsss.dipole`, :mod:`jsss.single_scattering`, :mod:`jsss.brdf`,
 :mod:`jsss.fresnel`, :mod:`jsss.materials`,
-:mod:`jsss.multipole`, :mod:`jsss.hankel`, :mod:`jsss.layers`. Lengths in mm, coefficients in 1/mm.
+:mod:`jsss.multipole`, :mod:`jsss.hankel`, :mod:`jsss.layers`, :mod:`jsss.transport` (profiles exact to
+radiative transfer), :mod:`jsss.montecarlo`. Lengths in mm, coefficients in 1/mm.
 """
 
 from . import (
@@ -18,6 +19,7 @@ from . import (
     numerics,
     sampling,
     single_scattering,
+    transport,
 )
 from .medium import Medium as Medium
 from .medium import reduced_albedo as reduced_albedo
@@ -37,4 +39,5 @@ __all__ = [
     "reduced_albedo",
     "sampling",
     "single_scattering",
+    "transport",
 ]

@@ -124,14 +124,17 @@ def pixel_exitance(method: str, profile: SampledProfile, radiant, eta, prep: Pix
 
 def pixel_radiance(method: str, profile: SampledProfile, radiant, eta, prep: PixelPrepared, *, samples: int = 32,
                    specular: bool = True, roughness: float = 0.35, specular_weight: float = 1.0, seed: int = 0,
-                   single_scattering: bool = False):
-    """Linear radiance (H, W, 3) of a pixel method (``single_scattering`` needs a dipole ``profile``)."""
+                   single_scattering: bool = False, medium=None):
+    """Linear radiance (H, W, 3) of a pixel method.
+
+    ``single_scattering`` needs the medium: ``medium`` if given (a profile model other than
+    the dipole, sampled through its Gaussians), else the dipole ``profile``'s own."""
     M = pixel_exitance(method, profile, radiant, eta, prep, samples=samples, seed=seed)
     dtype = M.dtype
     mask = jnp.asarray(prep.buffers.mask, dtype)
     cos_view = jnp.asarray((prep.buffers.normal * prep.buffers.view).sum(-1), dtype)
     lights = [g.astype(dtype) for g in prep.lights]
-    medium = profile.medium if single_scattering else None
+    medium = (profile.medium if medium is None else medium) if single_scattering else None
     L = surface_radiance(M, cos_view, eta, medium=medium, normals=jnp.asarray(prep.buffers.normal, dtype),
                          view_dirs=jnp.asarray(prep.buffers.view, dtype), light_geometry=lights, radiant=radiant)
     if specular:

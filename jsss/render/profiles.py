@@ -15,7 +15,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .. import dipole
+from .. import dipole, transport
 from .. import layers as _layers
 from ..gaussians import GaussianSum, empirical_dipole_fit, evaluate, layers_as_gaussians, to_gaussian_sum
 from .scene import Material
@@ -38,13 +38,21 @@ def full_profile(material: Material, medium=None) -> GaussianSum:
 
 
 def exact_profile(material: Material, r) -> np.ndarray:
-    """The reference :math:`R(r)` [1/mm^2], shape (N, 3): dipole, multilayer stack, or the given sum."""
+    """The reference :math:`R(r)` [1/mm^2], shape (N, 3): the medium's profile model (dipole or
+    transport), the multilayer stack, or the given sum."""
     r = jnp.asarray(r)
     if material.gaussians is not None:
         return np.asarray(evaluate(material.gaussians, r))
     if material.layers:
         return np.asarray(_layers.stack(list(material.layers), material.base, r=r).R)
-    return np.asarray(dipole.profile(material.medium, r))
+    return np.asarray(_medium_profile(material, material.medium, r)[0])
+
+
+def _medium_profile(material: Material, medium, r):
+    """Profile (N, 3) and total (3,) of a homogeneous medium under the material's profile model."""
+    if material.profile_model == "transport":
+        return transport.profile(medium, r, g=material.g), transport.total_reflectance(medium, g=material.g)
+    return dipole.profile(medium, r), dipole.total_reflectance(medium)
 
 
 def shared_variances(full: GaussianSum, n: int, *, significant: float = 1e-3) -> np.ndarray:
@@ -73,8 +81,7 @@ def _radii(full: GaussianSum) -> np.ndarray:
 def _reference(material: Material, r, medium=None):
     """Exact profile (N, 3) and total (3,) at radii ``r``; differentiable in ``medium``."""
     if material.medium is not None or medium is not None:
-        m = material.medium if medium is None else medium
-        return dipole.profile(m, r), dipole.total_reflectance(m)
+        return _medium_profile(material, material.medium if medium is None else medium, r)
     if material.gaussians is not None:
         profile = jnp.asarray(exact_profile(material, r), r.dtype)
         return profile, jnp.asarray(material.gaussians.weights, r.dtype).sum(0)

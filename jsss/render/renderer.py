@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..medium import Medium
 from .blur import blur_schedule, hierarchical_blur
 from .image_space import SampledProfile, camera_buffers
 from .lighting import irradiance, light_geometry, lookup, shadow_map, translucent_transmission
@@ -44,6 +45,7 @@ class RenderParams(eqx.Module):
     eta : (3,) relative index of refraction
     profile : SampledProfile, the exact profile the pixel methods integrate (the dipole of a
         homogeneous material, else the Gaussian sum above)
+    medium : Medium or None, a homogeneous material's medium (for the single-scattering pass)
     """
 
     weights: jax.Array
@@ -51,6 +53,7 @@ class RenderParams(eqx.Module):
     radiant: jax.Array
     eta: jax.Array
     profile: SampledProfile
+    medium: Medium | None = None
 
 
 def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32) -> RenderParams:
@@ -62,11 +65,17 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32) -
     eta = jnp.broadcast_to(jnp.asarray(eta), (3,))
     weights, variances = jnp.asarray(gs.weights, dtype), jnp.asarray(gs.variances, dtype)
     medium = scene.material.medium if medium is None else medium
-    if medium is not None and scene.material.kind == "medium":
+    if medium is not None and scene.material.kind == "medium" and scene.material.profile_model == "dipole":
+        # Image-space sampling draws from the dipole exactly; any other profile model is
+        # sampled through its Gaussian-sum fit (which matches the model's exact profile).
         profile = SampledProfile(medium=jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), medium))
     else:
         profile = SampledProfile(weights=weights, variances=variances)
-    return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile)
+    if medium is not None and scene.material.kind == "medium":
+        medium = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), medium)
+    else:
+        medium = None
+    return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile, medium)
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,8 +149,8 @@ def camera_pass(params: RenderParams, prep: Prepared, plan: Plan, M, roughness: 
     exitance = lookup(M, prep.pixel_uv, prep.texels.mask)
     cos_view = jnp.asarray((prep.pixel_normal * prep.pixel_view).sum(-1), dtype)
     lights = [g.astype(dtype) for g in prep.pixel_lights]
-    single = plan.on("single scattering") and params.profile.medium is not None
-    L = surface_radiance(exitance, cos_view, params.eta, medium=params.profile.medium if single else None,
+    single = plan.on("single scattering") and params.medium is not None
+    L = surface_radiance(exitance, cos_view, params.eta, medium=params.medium if single else None,
                          normals=jnp.asarray(prep.pixel_normal, dtype), view_dirs=jnp.asarray(prep.pixel_view, dtype),
                          light_geometry=lights, radiant=params.radiant)
     if plan.on("specular"):
@@ -221,7 +230,7 @@ def _render_pixels(scene: Scene, plan: Plan, *, dtype, timings: dict, time_passe
     frame = jax.jit(lambda p: pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples,
                                              specular=plan.on("specular"), roughness=material.roughness,
                                              specular_weight=material.specular,
-                                             single_scattering=plan.on("single scattering")))
+                                             single_scattering=plan.on("single scattering"), medium=p.medium))
     if time_passes:
         radiance, timings[f"{plan.method} frame"] = _timed(frame, params, repeats=repeats)
     else:

@@ -33,6 +33,7 @@ Every problem is reported as ``file: [table] key: what is wrong`` (:class:`Scene
 
 from __future__ import annotations
 
+import dataclasses
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import layers as _layers
+from .. import transport as _transport
 from ..gaussian_sum import GaussianSum
 from ..materials import jensen2001, jensen2001_names
 from ..medium import Medium
@@ -60,7 +62,9 @@ class Material:
 
     Exactly one of ``medium`` (homogeneous, semi-infinite), ``layers`` (+ optional ``base``)
     or ``gaussians`` (a given profile) is set. ``eta`` (3,) is the index the surface's
-    Fresnel terms use (the top layer's for a stack).
+    Fresnel terms use (the top layer's for a stack). A homogeneous medium's profile is the
+    dipole or, with ``profile_model = "transport"``, :mod:`jsss.transport` (exact to
+    radiative transfer) with Henyey-Greenstein ``g``.
     """
 
     label: str
@@ -71,6 +75,8 @@ class Material:
     gaussians: GaussianSum | None = None
     specular: float = 1.0
     roughness: float = 0.35
+    profile_model: str = "dipole"
+    g: float = 0.0
 
     @property
     def kind(self) -> str:
@@ -257,6 +263,17 @@ def _material(t: _Table, source: str) -> Material:
         eta = gt.vector("eta", 3, (1.3, 1.3, 1.3), positive=True, scalar_ok=True)
         gt.check_unknown()
         material = Material("given Gaussians", eta, gaussians=GaussianSum(weights, variances), **surface)
+    if t.has("profile") or t.has("g"):
+        model = t.string("profile", ("dipole", "transport"), "dipole")
+        g = t.number("g", 0.0)
+        if model == "transport":
+            if material.medium is None:
+                t.fail("profile", f"'transport' needs a homogeneous medium; this material is {material.kind}.")
+            try:
+                _transport.profile(material.medium, 1.0, g=g)
+            except ValueError as error:
+                t.fail("profile", str(error))
+        material = dataclasses.replace(material, profile_model=model, g=float(g))
     t.check_unknown()
     return material
 

@@ -1,0 +1,218 @@
+r"""Profiles exact to radiative transfer, from scaled Monte Carlo tables.
+
+For a semi-infinite homogeneous medium of relative index ``eta`` and Henyey-Greenstein
+``g`` under a normally incident pencil beam, the exitance profile per unit *entering* flux
+(as :func:`jsss.dipole.profile`) is
+
+.. math::
+
+    R(r) = \sigma_s'^2\, T\!\left(r\sigma_s',\ \sigma_a/\sigma_s'\right),
+
+exactly: :math:`T` is the Laplace transform of one absorption-free random walk's exit
+path lengths (see :mod:`jsss.transport_table`; lengths scale with :math:`1/\sigma_s'` and
+absorption weights each path by :math:`e^{-\sigma_a L}`). The tables shipped in
+``jsss/data/transport_tables.npz`` hold :math:`T` for eta 1.0-1.6 (step 0.1) and
+g in {0, 0.5, 0.8, 0.9}; ``eta`` is interpolated (Catmull-Rom), ``g`` must be one of the
+tabulated values. Between table nodes :math:`\log T` is interpolated with Catmull-Rom
+splines in :math:`\log\rho'` and :math:`\log a'`, so profiles are smooth in ``r``,
+``sigma_a``, ``sigma_s_prime`` and ``eta``, and ``jax.grad`` works through them. Their
+accuracy is the Monte Carlo noise of the tables (``photons`` in :func:`table_info`) plus the
+interpolation; ``benchmarks/profiles.py`` measures both against independent walks.
+
+Valid range: reduced albedo :math:`\alpha' \ge 0.03` (:math:`a' \le 10^{1.5}`), radii from
+:math:`10^{-3}` to :math:`10^3` transport lengths (log-log extrapolation outside), any
+:math:`\sigma_a \ge 0`. Per unit *incident* flux, multiply by the entry transmittance
+:func:`entry_transmittance` (a normally incident beam loses :math:`F(0)`).
+"""
+
+from __future__ import annotations
+
+import functools
+from importlib import resources
+
+import jax.numpy as jnp
+import numpy as np
+
+from .fresnel import fresnel_reflectance
+from .medium import Medium
+from .numerics import append_axes, as_float_array, is_concrete
+
+__all__ = ["entry_transmittance", "profile", "radiance", "table_info", "total_reflectance"]
+
+_FLOOR = 1e-30  # added before taking logs: empty table cells (no photon reached them)
+
+
+@functools.lru_cache(maxsize=None)
+def _tables():
+    with resources.files("jsss.data").joinpath("transport_tables.npz").open("rb") as handle:
+        data = dict(np.load(handle))
+    exitance = data["exitance"].astype(np.float64)                     # (eta, g, rho, a, mu)
+    mu_edges = data["mu_edges"]
+    solid = np.pi * np.diff(mu_edges**2)                                 # projected solid angle of each mu bin
+    data["log_exitance"] = np.log(exitance.sum(-1) + _FLOOR)             # (eta, g, rho, a)
+    data["log_radiance"] = np.log(exitance / solid + _FLOOR)             # (eta, g, rho, a, mu)
+    data["log_total"] = np.log(data["total"])                            # (eta, g, a)
+    data["mu_nodes"] = np.sqrt(0.5 * (mu_edges[:-1] ** 2 + mu_edges[1:] ** 2))
+    return data
+
+
+def table_info() -> dict:
+    """What the shipped tables hold: grids, photons per (eta, g), seed, the walk's cap [transport
+    lengths], the fraction capped per table (``lost``) and the totals' standard errors."""
+    data = _tables()
+    return {key: data[key] for key in ("etas", "gs", "rho_edges", "mu_edges", "absorption", "photons", "seed",
+                                       "max_path", "lost", "error_total")}
+
+
+def _g_index(g) -> int:
+    gs = _tables()["gs"]
+    matches = np.flatnonzero(np.isclose(gs, float(g), atol=1e-9))
+    if matches.size == 0:
+        raise ValueError(f"transport tables exist for g in {tuple(float(x) for x in gs)}; got g={g!r}. "
+                         "Use a tabulated g (the phase function is yours to give; sigma_s_prime carries the rest).")
+    return int(matches[0])
+
+
+def _check(medium: Medium):
+    if not is_concrete(medium):
+        return
+    etas = _tables()["etas"]
+    eta = np.asarray(medium.eta, float)
+    if np.any(eta < etas[0] - 1e-9) or np.any(eta > etas[-1] + 1e-9):
+        raise ValueError(f"transport tables cover eta {etas[0]}-{etas[-1]}; got eta={eta.tolist()!r}.")
+    if np.any(np.asarray(medium.sigma_s_prime, float) <= 0):
+        raise ValueError("transport profiles need sigma_s_prime > 0 [1/mm]; got "
+                         f"{np.asarray(medium.sigma_s_prime).tolist()!r}.")
+    ratio = np.asarray(medium.sigma_a, float) / np.asarray(medium.sigma_s_prime, float)
+    if np.any(ratio > _tables()["absorption"][-1] * (1 + 1e-9)):
+        raise ValueError(f"transport tables cover sigma_a / sigma_s_prime <= {_tables()['absorption'][-1]:.3g} "
+                         f"(reduced albedo >= 0.03); got {ratio.tolist()!r}.")
+
+
+def _catmull_rom(position, n):
+    """Indices (..., 4) and weights (..., 4) of a Catmull-Rom spline at fractional node
+    ``position`` on ``n`` uniform nodes (end nodes repeated)."""
+    base = jnp.clip(jnp.floor(position), 0, n - 2)
+    t = jnp.clip(position - base, 0.0, 1.0)  # beyond the end nodes: the end value
+    t2, t3 = t * t, t * t * t
+    weights = jnp.stack([(-t3 + 2 * t2 - t) / 2, (3 * t3 - 5 * t2 + 2) / 2, (-3 * t3 + 4 * t2 + t) / 2,
+                         (t3 - t2) / 2], axis=-1)
+    index = jnp.clip(base.astype(jnp.int32)[..., None] + jnp.arange(-1, 3), 0, n - 1)
+    return index, weights
+
+
+def _interpolate_eta_absorption(log_table, eta, absorption_ratio, etas, nodes):
+    """``log_table`` (n_eta, *middle, n_a) at each channel's (eta, a'): shape ``C + middle``."""
+    dtype = jnp.result_type(eta, absorption_ratio)
+    table = jnp.asarray(log_table, dtype)
+    middle = table.ndim - 2
+    e_index, e_weight = _catmull_rom((eta - etas[0]) / (etas[1] - etas[0]), etas.size)    # C + (4,)
+    rows = jnp.sum(table[e_index] * e_weight.reshape(e_weight.shape + (1,) * (middle + 1)),
+                   axis=e_weight.ndim - 1)                                                  # C + middle + (n_a,)
+
+    def spread(x):  # C + (4,) -> C + (1,)*middle + (4,)
+        return x.reshape(x.shape[:-1] + (1,) * middle + x.shape[-1:])
+
+    # a': node 0 is a' = 0 and nodes 1.. are uniform in log10 a'; below node 1, linear in a'.
+    first, step = np.log10(nodes[1]), np.log10(nodes[2]) - np.log10(nodes[1])
+    small = absorption_ratio < nodes[1]
+    log_a = jnp.log10(jnp.where(small, nodes[1], absorption_ratio))  # double where: finite grad at a' = 0
+    a_index, a_weight = _catmull_rom((log_a - first) / step, nodes.size - 1)
+    in_logspace = jnp.sum(jnp.take_along_axis(rows, spread(a_index + 1), axis=-1) * spread(a_weight), axis=-1)
+    fraction = (absorption_ratio / nodes[1]).reshape(absorption_ratio.shape + (1,) * middle)
+    near_zero = rows[..., 0] + fraction * (rows[..., 1] - rows[..., 0])
+    return jnp.where(small.reshape(fraction.shape), near_zero, in_logspace)
+
+
+def _radial(log_nodes, rho, rho_edges):
+    """Catmull-Rom in log rho of ``log_nodes`` (C + (n,), node k at the log-centre of bin k+1)
+    at ``rho`` (S + C), with log-log linear extrapolation beyond the end nodes."""
+    lo = np.log10(rho_edges[1])
+    step = np.log10(rho_edges[2]) - lo
+    n = log_nodes.shape[-1]
+    safe = jnp.where(rho > 0, rho, rho_edges[1] * 1e-3)
+    position = (jnp.log10(safe) - lo) / step - 0.5
+    index, weight = _catmull_rom(position, n)                                             # S + C + (4,)
+    channels = log_nodes.shape[:-1]
+    offset = (jnp.arange(int(np.prod(channels)), dtype=jnp.int32) * n).reshape(channels + (1,))
+    inside = jnp.sum(log_nodes.reshape(-1)[index + offset] * weight, axis=-1)
+    head = log_nodes[..., 0] + (log_nodes[..., 1] - log_nodes[..., 0]) * position
+    tail = log_nodes[..., -1] + (log_nodes[..., -1] - log_nodes[..., -2]) * (position - (n - 1))
+    return jnp.where(position < 0, head, jnp.where(position > n - 1, tail, inside))
+
+
+def _coefficients(medium: Medium):
+    sigma_s_prime = medium.sigma_s_prime
+    ratio = medium.sigma_a / sigma_s_prime
+    return sigma_s_prime, ratio, jnp.broadcast_to(medium.eta, ratio.shape)
+
+
+def profile(medium: Medium, r, *, g: float = 0.0):
+    r"""Exitance profile :math:`R(r)` [1/mm^2] per unit entering flux, exact to transport.
+
+    Parameters
+    ----------
+    medium : Medium
+        Of shape ``C``; ``eta`` in [1.0, 1.6], ``sigma_s_prime > 0``, reduced albedo >= 0.03.
+    r : array_like, mm
+        Distances from the entry point, any shape ``S``.
+    g : float, keyword-only
+        Henyey-Greenstein mean cosine: one of the tabulated values (0, 0.5, 0.8, 0.9).
+
+    Returns
+    -------
+    R : Array of shape ``S + C``, 1/mm^2.
+    """
+    _check(medium)
+    data = _tables()
+    sigma_s_prime, ratio, eta = _coefficients(medium)
+    # Bin 0 is the disc inside rho' = 1e-3: the nodes are the log-spaced annuli.
+    log_rows = _interpolate_eta_absorption(data["log_exitance"][:, _g_index(g), 1:], eta, ratio, data["etas"],
+                                           data["absorption"])                                  # C + (n_rho,)
+    r = append_axes(as_float_array(r), len(medium.shape))
+    rho = r * sigma_s_prime
+    return sigma_s_prime**2 * jnp.maximum(jnp.exp(_radial(log_rows, rho, data["rho_edges"])) - _FLOOR, 0.0)
+
+
+def total_reflectance(medium: Medium, *, g: float = 0.0):
+    r"""Total diffuse reflectance per unit entering flux, exact to transport (shape ``C``).
+
+    Taken from the walk's paths directly (no radial binning), with the capped tail added."""
+    _check(medium)
+    data = _tables()
+    _, ratio, eta = _coefficients(medium)
+    return jnp.exp(_interpolate_eta_absorption(data["log_total"][:, _g_index(g)], eta, ratio, data["etas"],
+                                               data["absorption"]))
+
+
+def radiance(medium: Medium, r, cos_exit, *, g: float = 0.0):
+    r"""Radiance leaving the surface at ``r`` toward exit cosine ``cos_exit`` [1/(mm^2 sr)],
+    per unit entering flux: what a camera at that angle records (before its own units).
+
+    The tables bin exit directions in 8 bins of equal projected solid angle; the radiance is
+    linear in :math:`\mu` between their centres and constant beyond the outermost ones.
+    ``r`` and ``cos_exit`` broadcast together (shape ``S``); the result is ``S + C``.
+    """
+    _check(medium)
+    data = _tables()
+    sigma_s_prime, ratio, eta = _coefficients(medium)
+    table = np.moveaxis(data["log_radiance"][:, _g_index(g), 1:], -1, 1)   # (eta, mu, rho, a)
+    log_rows = _interpolate_eta_absorption(table, eta, ratio, data["etas"], data["absorption"])  # C + (mu, rho)
+    r, cos_exit = jnp.broadcast_arrays(as_float_array(r), as_float_array(cos_exit))
+    r = append_axes(r, len(medium.shape))
+    cos_exit = append_axes(cos_exit, len(medium.shape))
+    rho = r * sigma_s_prime
+    nodes = data["mu_nodes"]
+    per_bin = jnp.stack([jnp.exp(_radial(log_rows[..., m, :], rho, data["rho_edges"])) for m in range(nodes.size)],
+                        axis=-1)
+    position = jnp.interp(cos_exit, nodes, np.arange(nodes.size, dtype=float))
+    lower = jnp.clip(jnp.floor(position).astype(jnp.int32), 0, nodes.size - 2)
+    t = position - lower
+    pick = lambda i: jnp.take_along_axis(per_bin, i[..., None], axis=-1)[..., 0]  # noqa: E731
+    value = (1 - t) * pick(lower) + t * pick(lower + 1)
+    return sigma_s_prime**2 * jnp.maximum(value - _FLOOR, 0.0)
+
+
+def entry_transmittance(eta):
+    r"""Fraction of a normally incident beam that enters: :math:`1 - F(0) = 1 - ((\eta-1)/(\eta+1))^2`."""
+    return 1.0 - fresnel_reflectance(1.0, eta)

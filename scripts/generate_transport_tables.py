@@ -1,0 +1,93 @@
+"""Regenerate jsss/data/transport_tables.npz: scaled Monte Carlo tables for jsss.transport.
+
+One absorption-free walk per (eta, g) in transport lengths (sigma_s' = 1, sigma_a = 0),
+capped at --max-path transport lengths (the tail beyond is modelled, see
+jsss.transport_table). The walk is jsss.photon_walk, the engine of jsss.montecarlo: its
+numbers are counter-based, so a seed reproduces the tables bit for bit on one platform.
+
+Run from the repository root (float64; about 2 CPU-minutes per eta for 100 000 photons):
+``python scripts/generate_transport_tables.py [--photons 100000] [--seed 0] [--etas 1.0,1.1,...]``
+Several processes may each write a part (``--out part.npz --etas 1.0,1.1``) and
+``--merge part1.npz part2.npz`` joins them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import numpy as np  # noqa: E402
+
+from jsss import Medium  # noqa: E402
+from jsss.montecarlo import _params  # noqa: E402
+from jsss.photon_walk import run_walk  # noqa: E402
+from jsss.transport_table import TableGrid, tabulate  # noqa: E402
+
+ETAS = (1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6)
+GS = (0.0, 0.5, 0.8, 0.9)
+MAX_PATH = 1000.0  # transport lengths
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "jsss" / "data" / "transport_tables.npz"
+
+
+def build(etas, gs, *, photons, seed, max_path=MAX_PATH, lanes=4096, progress=True):
+    grid = TableGrid()
+    shape = (len(etas), len(gs))
+    exitance = np.zeros(shape + (grid.rho_edges.size - 1, grid.absorption.size, grid.mu_edges.size - 1))
+    total, error_total = np.zeros(shape + (grid.absorption.size,)), np.zeros(shape + (grid.absorption.size,))
+    lost, tail_mass = np.zeros(shape), np.zeros(shape)
+    for i, eta in enumerate(etas):
+        for j, g in enumerate(gs):
+            start = time.perf_counter()
+            # sigma_s = 1/(1-g) per transport length: every length below is in units of 1/sigma_s'.
+            params = _params([Medium(0.0, 1.0, eta)], [np.inf], g=g, eta_above=1 / eta, eta_below=1 / eta,
+                             relative=True)
+            table_seed = seed * 1000 + int(round(eta * 100)) * 10 + j
+            records = run_walk(params, n_photons=photons, lanes=lanes, max_steps=2**31 - 1, max_path=max_path,
+                               seed=table_seed, progress=progress, label=f"eta {eta} g {g}")
+            out = tabulate(records.radius, records.path, records.exit_cos, records.side == 1, records.side == 0,
+                           grid=grid, max_path=max_path)
+            exitance[i, j], total[i, j], error_total[i, j] = out["exitance"], out["total"], out["error_total"]
+            lost[i, j], tail_mass[i, j] = out["lost"], out["tail_mass"]
+            print(f"eta {eta} g {g}: R(a'=0) = {out['total'][0]:.5f}, lost {out['lost']:.4f} "
+                  f"(tail model {out['tail_mass']:.4f}), {time.perf_counter() - start:.0f} s", file=sys.stderr)
+    return dict(etas=np.asarray(etas, float), gs=np.asarray(gs, float), rho_edges=grid.rho_edges,
+                mu_edges=grid.mu_edges, absorption=grid.absorption, exitance=exitance.astype(np.float32),
+                total=total, error_total=error_total, lost=lost, tail_mass=tail_mass,
+                photons=np.int64(photons), seed=np.int64(seed), max_path=np.float64(max_path))
+
+
+def merge(paths):
+    parts = [dict(np.load(p)) for p in paths]
+    parts.sort(key=lambda p: p["etas"][0])
+    out = dict(parts[0])
+    for key in ("etas", "exitance", "total", "error_total", "lost", "tail_mass"):
+        out[key] = np.concatenate([p[key] for p in parts])
+    return out
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--photons", type=int, default=100_000)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--etas", default=",".join(str(e) for e in ETAS))
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--merge", nargs="+", type=Path)
+    args = parser.parse_args()
+    if args.merge:
+        tables = merge(args.merge)
+    else:
+        tables = build([float(e) for e in args.etas.split(",")], GS, photons=args.photons, seed=args.seed)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = args.out.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, **tables)
+    tmp.replace(args.out)
+    print(f"wrote {args.out} ({args.out.stat().st_size / 1e6:.1f} MB)", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
