@@ -57,7 +57,7 @@ def _merge_frames(paths, saturation, dark):
 
 
 def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference_reflectance=0.99, model="dipole",
-                  grid=None, saturation=None):
+                  g=0.0, grid=None, saturation=None):
     from .exr import read_exr
     from .pipeline import fit_measurement
 
@@ -87,9 +87,16 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
         raise UsageError(f"--eta must be > 0 (the relative index of refraction, e.g. 1.3); got {eta}")
     if pixel_mm <= 0:
         raise UsageError(f"--pixel-mm must be > 0; got {pixel_mm}")
+    if model == "transport":
+        from jsss import Medium, transport
+
+        try:
+            transport.profile(Medium(0.01, 1.0, float(eta)), 1.0, g=g)
+        except ValueError as error:
+            raise UsageError(f"--model transport: {error}") from None
     return fit_measurement(meas.pixels, ref.pixels, float(pixel_mm), float(eta),
                            dark=None if dark_img is None else dark_img.pixels,
-                           reference_reflectance=reference_reflectance, model=model, channels=meas.channels,
+                           reference_reflectance=reference_reflectance, model=model, g=g, channels=meas.channels,
                            grid=grid)
 
 
@@ -120,18 +127,21 @@ def _plot(result, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from jsss import dipole
+    from jsss import dipole, transport
 
     prof = result.profile
     fig, ax = plt.subplots(figsize=(6, 4))
     r = np.geomspace(max(prof.r_mm[0], 1e-3), prof.r_mm[-1], 200)
-    model = np.asarray(dipole.profile(result.fit.medium, r)).reshape(r.size, -1)
+    if result.model == "transport":
+        model = np.asarray(transport.profile(result.fit.medium, r, g=result.g)).reshape(r.size, -1)
+    else:
+        model = np.asarray(dipole.profile(result.fit.medium, r)).reshape(r.size, -1)
     colours = {"R": "tab:red", "G": "tab:green", "B": "tab:blue"}
     for c, name in enumerate(result.channels):
         colour = colours.get(name, "k")
         ax.errorbar(prof.r_mm, prof.mean[:, c], yerr=prof.stderr[:, c], fmt=".", ms=3, color=colour,
                     label=f"{name} measured")
-        ax.plot(r, model[:, c], "-", color=colour, lw=1, label=f"{name} dipole fit")
+        ax.plot(r, model[:, c], "-", color=colour, lw=1, label=f"{name} {result.model} fit")
     ax.set(xscale="log", yscale="log", xlabel="r [mm]", ylabel="R_d(r) [1/mm^2]", title="fit-params")
     ax.legend(fontsize=7)
     fig.tight_layout()
@@ -143,7 +153,7 @@ def _single(args) -> int:
     if not args.reference:
         raise UsageError("--reference REF.exr is required (or use --demo)")
     result = _load_and_fit(args.measurement, args.reference, pixel_mm=args.pixel_mm, eta=args.eta, dark=args.dark,
-                           reference_reflectance=args.reference_reflectance, model=args.model,
+                           reference_reflectance=args.reference_reflectance, model=args.model, g=args.g,
                            saturation=args.saturation)
     _report(result, args)
     return 0
@@ -184,7 +194,7 @@ def _demo(args) -> int:
             print(f"demo: synthetic marble measurement (256 x 256 px, 0.05 mm pixels, Gaussian beam 0.05 mm, "
                   f"shot and read noise) written to {tmp}")
         result = _load_and_fit(paths["measurement"], paths["reference"], pixel_mm=None, eta=1.5,
-                               dark=paths.get("dark"), model=args.model)
+                               dark=paths.get("dark"), model=args.model, g=args.g)
     _report(result, args, truth=synthetic.truth)
     return 0
 
@@ -243,7 +253,7 @@ def _rows(jobs, args):
             result = _load_and_fit(measurement, reference, pixel_mm=overrides.get("pixel_mm", args.pixel_mm),
                                    eta=overrides.get("eta", args.eta), dark=dark,
                                    reference_reflectance=overrides.get("reference_reflectance", args.reference_reflectance),
-                                   model=args.model, grid=grid)
+                                   model=args.model, g=args.g, grid=grid)
             table = result.table()
             for key in ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance",
                         "mean_free_path_mm", "rel_residual", "converged"):
@@ -294,7 +304,10 @@ def _batch(argv) -> int:
     parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
     parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
     parser.add_argument("--reference-reflectance", type=float, default=0.99)
-    parser.add_argument("--model", default="dipole", choices=["dipole"])
+    parser.add_argument("--model", default="dipole", choices=["dipole", "transport"],
+                        help="profile model: dipole (diffusion) or transport (scaled Monte Carlo tables)")
+    parser.add_argument("--g", type=float, default=0.0,
+                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9)")
     args = parser.parse_args(argv)
     if not args.target and not args.manifest:
         raise UsageError("batch needs a directory/glob or --manifest")
@@ -323,7 +336,11 @@ def _parser():
     parser.add_argument("--reference-reflectance", type=float, default=0.99,
                         help="total reflectance of the reference (default 0.99, Spectralon)")
     parser.add_argument("--saturation", type=float, help="clip level of a bracket (needed with several frames)")
-    parser.add_argument("--model", default="dipole", choices=["dipole"], help="forward model")
+    parser.add_argument("--model", default="dipole", choices=["dipole", "transport"],
+                        help="profile model: dipole (diffusion) or transport (scaled Monte Carlo tables, exact "
+                             "to radiative transfer)")
+    parser.add_argument("--g", type=float, default=0.0,
+                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9)")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--plot", help="write a PNG of the profile and the fit")
     parser.add_argument("--demo", action="store_true", help="fit a synthetic marble measurement")

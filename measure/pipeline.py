@@ -27,6 +27,8 @@ class MeasurementFit:
     center: tuple[float, float]
     beam_sigma_mm: float
     channels: tuple[str, ...]
+    model: str = "dipole"
+    g: float = 0.0
 
     def table(self) -> dict:
         """Per-channel results as plain lists (the JSON and CSV schema)."""
@@ -44,6 +46,8 @@ class MeasurementFit:
             "mean_free_path_mm": as_list(1.0 / (np.asarray(f.medium.sigma_a) + np.asarray(f.medium.sigma_s_prime))),
             "rel_residual": as_list(f.rel_residual),
             "converged": [bool(x) for x in np.asarray(f.converged).reshape(-1)],
+            "model": self.model,
+            "g": self.g,
         }
 
 
@@ -61,7 +65,7 @@ def _sum_variance(image, center, pixel_mm):
 
 
 def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, reference_reflectance: float = 0.99,
-                    model: str = "dipole", channels=("R", "G", "B"), n_bins: int = 48,
+                    model: str = "dipole", g: float = 0.0, channels=("R", "G", "B"), n_bins: int = 48,
                     r_min_mm: float | None = None, grid=None) -> MeasurementFit:
     """Calibrate, bin and fit one measurement (images ``(H, W, C)``).
 
@@ -69,7 +73,8 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     start at ``r_min_mm`` (default: the larger of 2 pixels and 2 beam widths), where the
     image is dominated by the sample rather than by the beam's core. ``grid`` is the
     Hankel grid of the model (build one with :func:`jsss.hankel.hankel_grid` and pass it
-    when fitting many measurements).
+    when fitting many measurements). ``model`` and ``g`` choose the profile model (see
+    :func:`fitting.medium.fit_medium`).
     """
     calibrated = calibrate(measurement, reference, pixel_mm, reference_reflectance=reference_reflectance, dark=dark)
     offset = 0 if dark is None else np.asarray(dark, dtype=float)
@@ -105,5 +110,5 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     fit = fit_medium(mean, err, eta, pixel_radii=radii, bin_index=index,
                      total_reflectance=calibrated.total_reflectance, total_stderr=total_stderr,
                      field_radii=field, pixel_area=pixel_mm**2, scale_stderr=scale_stderr, beam_sigma=sigma,
-                     model=model, grid=grid)
-    return MeasurementFit(fit, profile, calibrated, center, sigma, tuple(channels))
+                     model=model, g=g, grid=grid)
+    return MeasurementFit(fit, profile, calibrated, center, sigma, tuple(channels), model, float(g))

@@ -42,6 +42,21 @@ def test_demo_prints_truth_beside_estimate_as_json():
     np.testing.assert_allclose(table["sigma_s_prime"], table["truth"]["sigma_s_prime"], rtol=0.05)
 
 
+def test_transport_model_fits_and_says_so(measurements, tmp_path):
+    """--model transport runs the fit through the scaled Monte Carlo tables and records the
+    model and g in the JSON (synthetic dipole images: the truth is not transport here, so
+    only sanity is asserted: finite, positive, converged)."""
+    d = measurements
+    plot = tmp_path / "fit.png"
+    out = run(d / "skin1.exr", "--reference", d / "skin1_ref.exr", "--dark", d / "skin1_dark.exr", "--eta", 1.3,
+              "--model", "transport", "--g", 0.8, "--json", "--plot", plot)
+    assert out.returncode == 0, out.stderr
+    table = json.loads(out.stdout)
+    assert table["model"] == "transport" and table["g"] == 0.8
+    assert all(np.isfinite(table["sigma_a"])) and min(table["sigma_s_prime"]) > 0 and all(table["converged"])
+    assert plot.stat().st_size > 1000
+
+
 def test_single_measurement_table_and_plot(measurements, tmp_path):
     """A measurement with its reference and dark frame prints a table and writes the plot."""
     d = measurements
@@ -88,6 +103,7 @@ def test_manifest_lists_measurements(measurements, tmp_path):
         ("eta", "--eta must be > 0"),
         ("no_reference", "--reference REF.exr is required"),
         ("shape", "differs from"),
+        ("g", "--model transport: transport tables exist for g in"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path):
@@ -111,6 +127,8 @@ def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path
         args = [d / "skin1.exr", "--reference", ref, "--eta", -1]
     elif case == "no_reference":
         args = [d / "skin1.exr"]
+    elif case == "g":
+        args = [d / "skin1.exr", "--reference", ref, "--model", "transport", "--g", 0.3]
     else:
         args = [write_exr(tmp_path / "small.exr", np.ones((8, 8, 3))), "--reference", ref, "--pixel-mm", 0.05]
     out = run(*args)
