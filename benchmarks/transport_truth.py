@@ -16,13 +16,16 @@ agree to 1 %), which proves that camera, image orientation and light units are t
 A plane is open; a medium needs a closed surface, so the plane becomes the top face of a
 box 30 mm deep (the lights see only its top; pixels are compared where jsss sees the plane).
 
-Printed per scene, method and channel: the ratio of summed subsurface radiance jsss /
-Mitsuba and the relative RMS error against it, with the path tracer's own noise.
+Printed per scene, method, profile model (``--profiles dipole transport``: the dipole, and
+the scaled Monte Carlo tables of `jsss.transport`, exact to transport) and channel: the ratio
+of summed subsurface radiance jsss / Mitsuba and the relative RMS error against it, with the
+path tracer's own noise.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import tempfile
@@ -170,6 +173,9 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true", help="40 x 30 pixels, 2 chunks")
     parser.add_argument("--spp", type=int, default=32, help="path-tracer samples per pixel per chunk")
     parser.add_argument("--scenes", nargs="*", default=["marble_sphere", "ketchup_plane"])
+    parser.add_argument("--profiles", nargs="*", default=["dipole", "transport"], choices=["dipole", "transport"],
+                        help="jsss profile models to compare (the path tracer runs once for all)")
+    parser.add_argument("--methods", nargs="*", default=["lambert", "normal filtering", "image-space", "texture-space"])
     args = parser.parse_args(argv)
     mi = _mitsuba()
     width, height, chunks = (40, 30, 2) if args.quick else (80, 60, 4)
@@ -188,10 +194,12 @@ def main(argv=None):
             noise = ratios.std(0, ddof=1) / np.sqrt(chunks)
             print(f"path tracer: {time.perf_counter() - t0:.0f} s; its own noise on the sums "
                   + " / ".join(f"{100 * x:.1f} %" for x in noise))
-            print("| method | single scattering | ratio R | ratio G | ratio B | rel. RMS R | G | B |")
-            print("|---|---|---:|---:|---:|---:|---:|---:|")
-            for method in ("lambert", "normal filtering", "image-space", "texture-space"):
-                ours, single = _ours(scene, method)
+            print("| method | profile | single scattering | ratio R | ratio G | ratio B | rel. RMS R | G | B |")
+            print("|---|---|---|---:|---:|---:|---:|---:|---:|")
+            runs = [(method, profile) for profile in args.profiles for method in args.methods]
+            for method, profile in runs:
+                material = dataclasses.replace(scene.material, profile_model=profile)
+                ours, single = _ours(dataclasses.replace(scene, material=material), method)
                 ratio = ours[inner].sum(0) / truth[inner].sum(0)
                 # The path tracer's own per-pixel variance (from the chunks) is taken out of the
                 # mean square, so the RMS measures jsss's error, not Mitsuba's noise.
@@ -201,7 +209,8 @@ def main(argv=None):
                 power = (truth[inner] ** 2).mean(0) - noise_var
                 rms = [f"{100 * np.sqrt(m / p):.1f} %" if m > 0 and p > 0 else "below noise"
                        for m, p in zip(mse, power)]
-                print(f"| {method} | {'on' if single else 'off'} | " + " | ".join(f"{r:.3f}" for r in ratio) + " | "
+                print(f"| {method} | {profile} | {'on' if single else 'off'} | " + " | ".join(f"{r:.3f}" for r in ratio)
+                      + " | "
                       + " | ".join(rms) + " |")
 
 

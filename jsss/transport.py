@@ -19,7 +19,7 @@ splines in :math:`\log\rho'` and :math:`\log a'`, so profiles are smooth in ``r`
 accuracy is the Monte Carlo noise of the tables (``photons`` in :func:`table_info`) plus the
 interpolation; ``benchmarks/profiles.py`` measures both against independent walks.
 
-Valid range: reduced albedo :math:`\alpha' \ge 0.03` (:math:`a' \le 10^{1.5}`), radii from
+Valid range: reduced albedo :math:`\alpha' \ge 0.001` (:math:`a' \le 10^3`), radii from
 :math:`10^{-3}` to :math:`10^3` transport lengths (log-log extrapolation outside), any
 :math:`\sigma_a \ge 0`. Per unit *incident* flux, multiply by the entry transmittance
 :func:`entry_transmittance` (a normally incident beam loses :math:`F(0)`).
@@ -86,7 +86,7 @@ def _check(medium: Medium):
     ratio = np.asarray(medium.sigma_a, float) / np.asarray(medium.sigma_s_prime, float)
     if np.any(ratio > _tables()["absorption"][-1] * (1 + 1e-9)):
         raise ValueError(f"transport tables cover sigma_a / sigma_s_prime <= {_tables()['absorption'][-1]:.3g} "
-                         f"(reduced albedo >= 0.03); got {ratio.tolist()!r}.")
+                         f"(reduced albedo >= 0.001); got {ratio.tolist()!r}.")
 
 
 def _catmull_rom(position, n):
@@ -153,7 +153,7 @@ def profile(medium: Medium, r, *, g: float = 0.0):
     Parameters
     ----------
     medium : Medium
-        Of shape ``C``; ``eta`` in [1.0, 1.6], ``sigma_s_prime > 0``, reduced albedo >= 0.03.
+        Of shape ``C``; ``eta`` in [1.0, 1.6], ``sigma_s_prime > 0``, reduced albedo >= 0.001.
     r : array_like, mm
         Distances from the entry point, any shape ``S``.
     g : float, keyword-only

@@ -45,13 +45,14 @@ class TableGrid:
 
     ``rho_edges`` [transport lengths]: 0, then log-spaced from ``1e-3`` to ``1e3``;
     ``mu_edges``: exit cosines, uniform in :math:`\\mu^2` (equal projected solid angle);
-    ``absorption``: the :math:`a'` nodes, 0 then log-spaced from 1e-5 to 10^1.5.
+    ``absorption``: the :math:`a'` nodes, 0 then log-spaced from 1e-5 to 1e3 (reduced albedo
+    down to 0.001: ketchup's blue is 0.02).
     """
 
     def __init__(self, *, rho_per_decade=12, mu_bins=8, absorption_per_decade=5):
         self.rho_edges = np.concatenate([[0.0], np.logspace(-3, 3, 6 * rho_per_decade + 1)])
         self.mu_edges = np.sqrt(np.linspace(0.0, 1.0, mu_bins + 1))
-        self.absorption = np.concatenate([[0.0], np.logspace(-5, 1.5, int(6.5 * absorption_per_decade) + 1)])
+        self.absorption = np.concatenate([[0.0], np.logspace(-5, 3, 8 * absorption_per_decade + 1)])
 
     @property
     def annulus_area(self):

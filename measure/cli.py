@@ -83,7 +83,7 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
         pixel_mm = meas.header.get("jsss_pixel_mm")
         if pixel_mm is None:
             raise UsageError(f"{meas.path}: no pixel size in the header (jsss_pixel_mm); pass --pixel-mm")
-    if eta is None or eta <= 0:
+    if eta is None or not np.isfinite(eta) or eta <= 0:
         raise UsageError(f"--eta must be > 0 (the relative index of refraction, e.g. 1.3); got {eta}")
     if pixel_mm <= 0:
         raise UsageError(f"--pixel-mm must be > 0; got {pixel_mm}")

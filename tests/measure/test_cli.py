@@ -101,6 +101,7 @@ def test_manifest_lists_measurements(measurements, tmp_path):
         ("nan", "NaN/Inf"),
         ("saturated", "looks saturated"),
         ("eta", "--eta must be > 0"),
+        ("eta_nan", "--eta must be > 0 (the relative index of refraction, e.g. 1.3); got nan"),
         ("no_reference", "--reference REF.exr is required"),
         ("shape", "differs from"),
         ("g", "--model transport: transport tables exist for g in"),
@@ -125,6 +126,8 @@ def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path
         args = [write_exr(tmp_path / "sat.exr", image), "--reference", ref, "--pixel-mm", 0.05]
     elif case == "eta":
         args = [d / "skin1.exr", "--reference", ref, "--eta", -1]
+    elif case == "eta_nan":
+        args = [d / "skin1.exr", "--reference", ref, "--eta", "nan"]
     elif case == "no_reference":
         args = [d / "skin1.exr"]
     elif case == "g":
