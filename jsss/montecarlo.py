@@ -63,7 +63,7 @@ class MonteCarloResult:
 
 
 def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=None, eta_bottom=None,
-                n_photons: int = 100_000, batch_size: int = 4096, max_steps: int = 2000, bin_edges=None,
+                n_photons: int = 100_000, batch_size: int = 4096, max_steps: int = 1_000_000, bin_edges=None,
                 seed: int = 0, progress: bool | None = None) -> MonteCarloResult:
     """Run the random walk for a single-channel medium.
 
@@ -81,7 +81,11 @@ def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=No
     batch_size : int, keyword-only
         Photons walking at once (lanes of the vectorised walk); the result does not depend on it.
     max_steps : int, keyword-only
-        Events (collisions and boundary hits) after which a photon still inside is lost.
+        Events (collisions and boundary hits) after which a photon still inside is lost. The
+        default, 10^6, cuts no photon of an absorbing medium short (Russian roulette ends
+        every walk long before); a non-absorbing half space has a heavy path-length tail
+        (about 2.5 / sqrt(L) of the photons walk more than L transport lengths), so there
+        ``lost`` is what the cap leaves inside. Refilled lanes keep long walks cheap.
     bin_edges : array_like [mm], optional, keyword-only
         Radial bins (default: 64 log-spaced edges from 0.01 to 100 mean free paths, plus 0
         and infinity so every exiting photon is in a bin).
@@ -105,7 +109,7 @@ def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=No
 
 def random_walk_layers(layers, base: Medium | None = None, *, g: float = 0.0, eta_above: float = 1.0,
                        eta_below: float = 1.0, n_photons: int = 100_000, batch_size: int = 4096,
-                       max_steps: int = 2000, bin_edges=None, seed: int = 0,
+                       max_steps: int = 1_000_000, bin_edges=None, seed: int = 0,
                        progress: bool | None = None) -> MonteCarloResult:
     """Random walk through a stack of :class:`jsss.layers.Layer` (top first), over an optional
     semi-infinite ``base``. Each ``medium.eta`` is the layer's absolute index; photons refract
