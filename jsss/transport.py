@@ -20,7 +20,7 @@ accuracy is the Monte Carlo noise of the tables (``photons`` in :func:`table_inf
 interpolation; ``benchmarks/profiles.py`` measures both against independent walks.
 
 Valid range: reduced albedo :math:`\alpha' \ge 0.001` (:math:`a' \le 10^3`), radii from
-:math:`10^{-3}` to :math:`10^3` transport lengths (log-log extrapolation outside), any
+:math:`10^{-3}` to :math:`10^3` transport lengths (constant inside, decaying beyond), any
 :math:`\sigma_a \ge 0`. Per unit *incident* flux, multiply by the entry transmittance
 :func:`entry_transmittance` (a normally incident beam loses :math:`F(0)`).
 """
@@ -42,6 +42,24 @@ __all__ = ["entry_transmittance", "profile", "radiance", "table_info", "total_re
 _FLOOR = 1e-30  # added before taking logs: empty table cells (no photon reached them)
 
 
+def _log_filled(values, axis):
+    """``log(values)`` with the empty cells (no photon reached them) filled along ``axis`` (the
+    radius): between and before recorded cells linearly in log from their neighbours, so a
+    missing photon does not become a hole of depth log(1e-30) for the splines to ring on;
+    after the last recorded cell, ``log(_FLOOR)`` (the light there is below what the walk
+    resolves)."""
+    moved = np.moveaxis(np.asarray(values, float), axis, -1)
+    flat = moved.reshape(-1, moved.shape[-1])
+    out = np.full(flat.shape, np.log(_FLOOR))
+    index = np.arange(flat.shape[-1])
+    for row, cells in enumerate(flat):
+        recorded = np.flatnonzero(cells > 0)
+        if recorded.size:
+            upto = index <= recorded[-1]
+            out[row, upto] = np.interp(index[upto], recorded, np.log(cells[recorded]))
+    return np.moveaxis(out.reshape(moved.shape), -1, axis)
+
+
 @functools.lru_cache(maxsize=None)
 def _tables():
     with resources.files("jsss.data").joinpath("transport_tables.npz").open("rb") as handle:
@@ -49,8 +67,8 @@ def _tables():
     exitance = data["exitance"].astype(np.float64)                     # (eta, g, rho, a, mu)
     mu_edges = data["mu_edges"]
     solid = np.pi * np.diff(mu_edges**2)                                 # projected solid angle of each mu bin
-    data["log_exitance"] = np.log(exitance.sum(-1) + _FLOOR)             # (eta, g, rho, a)
-    data["log_radiance"] = np.log(exitance / solid + _FLOOR)             # (eta, g, rho, a, mu)
+    data["log_exitance"] = _log_filled(exitance.sum(-1), axis=2)         # (eta, g, rho, a)
+    data["log_radiance"] = _log_filled(exitance / solid, axis=2)         # (eta, g, rho, a, mu)
     data["log_total"] = np.log(data["total"])                            # (eta, g, a)
     data["mu_nodes"] = np.sqrt(0.5 * (mu_edges[:-1] ** 2 + mu_edges[1:] ** 2))
     return data
@@ -124,9 +142,12 @@ def _interpolate_eta_absorption(log_table, eta, absorption_ratio, etas, nodes):
     return jnp.where(small.reshape(fraction.shape), near_zero, in_logspace)
 
 
-def _radial(log_nodes, rho, rho_edges):
-    """Catmull-Rom in log rho of ``log_nodes`` (C + (n,), node k at the log-centre of bin k+1)
-    at ``rho`` (S + C), with log-log linear extrapolation beyond the end nodes."""
+def _radial(log_cells, rho, rho_edges):
+    """Catmull-Rom in log rho of ``log_cells`` (C + (n + 1,): the inner disc rho' < 1e-3, then
+    n annuli whose log-centres are the nodes) at ``rho`` (S + C). Inside the disc its mean
+    holds (so the disc keeps its light: a quarter of ketchup's blue is there); beyond the
+    last node (rho' > 1e3) the end slope continues in log-log, never rising."""
+    disc, log_nodes = log_cells[..., 0], log_cells[..., 1:]
     lo = np.log10(rho_edges[1])
     step = np.log10(rho_edges[2]) - lo
     n = log_nodes.shape[-1]
@@ -136,8 +157,8 @@ def _radial(log_nodes, rho, rho_edges):
     channels = log_nodes.shape[:-1]
     offset = (jnp.arange(int(np.prod(channels)), dtype=jnp.int32) * n).reshape(channels + (1,))
     inside = jnp.sum(log_nodes.reshape(-1)[index + offset] * weight, axis=-1)
-    head = log_nodes[..., 0] + (log_nodes[..., 1] - log_nodes[..., 0]) * position
-    tail = log_nodes[..., -1] + (log_nodes[..., -1] - log_nodes[..., -2]) * (position - (n - 1))
+    head = jnp.where(rho < rho_edges[1], disc, log_nodes[..., 0])
+    tail = log_nodes[..., -1] + jnp.minimum(log_nodes[..., -1] - log_nodes[..., -2], 0.0) * (position - (n - 1))
     return jnp.where(position < 0, head, jnp.where(position > n - 1, tail, inside))
 
 
@@ -166,8 +187,7 @@ def profile(medium: Medium, r, *, g: float = 0.0):
     _check(medium)
     data = _tables()
     sigma_s_prime, ratio, eta = _coefficients(medium)
-    # Bin 0 is the disc inside rho' = 1e-3: the nodes are the log-spaced annuli.
-    log_rows = _interpolate_eta_absorption(data["log_exitance"][:, _g_index(g), 1:], eta, ratio, data["etas"],
+    log_rows = _interpolate_eta_absorption(data["log_exitance"][:, _g_index(g)], eta, ratio, data["etas"],
                                            data["absorption"])                                  # C + (n_rho,)
     r = append_axes(as_float_array(r), len(medium.shape))
     rho = r * sigma_s_prime
@@ -196,7 +216,7 @@ def radiance(medium: Medium, r, cos_exit, *, g: float = 0.0):
     _check(medium)
     data = _tables()
     sigma_s_prime, ratio, eta = _coefficients(medium)
-    table = np.moveaxis(data["log_radiance"][:, _g_index(g), 1:], -1, 1)   # (eta, mu, rho, a)
+    table = np.moveaxis(data["log_radiance"][:, _g_index(g)], -1, 1)   # (eta, mu, rho, a)
     log_rows = _interpolate_eta_absorption(table, eta, ratio, data["etas"], data["absorption"])  # C + (mu, rho)
     r, cos_exit = jnp.broadcast_arrays(as_float_array(r), as_float_array(cos_exit))
     r = append_axes(r, len(medium.shape))

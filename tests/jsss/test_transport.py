@@ -237,3 +237,25 @@ def test_table_generation_is_reproducible_bit_for_bit():
     c = script.build([1.3], [0.5], seed=2, lanes=256, **kwargs)
     assert np.array_equal(a["exitance"], b["exitance"]) and np.array_equal(a["total"], b["total"])
     assert not np.array_equal(a["exitance"], c["exitance"])
+
+
+@pytest.mark.parametrize("channel", [0, 1, 2])
+def test_low_albedo_profile_keeps_its_light_near_the_source(channel):
+    """Ketchup (reduced albedo 0.75 / 0.07 / 0.02): the profile integrated over the plane from
+    r = 0 returns the total within 1 %, although a quarter of the blue light leaves within a
+    thousandth of a transport length (the tables' inner disc); and the radiance integrated
+    over the hemisphere is the exitance there too (a sparse cosine bin once made the radiance
+    at r -> 0 grow without bound)."""
+    from jsss.materials import jensen2001
+
+    k = jensen2001("ketchup")
+    medium = Medium(k.sigma_a[channel], k.sigma_s_prime[channel], 1.3)
+    r = np.concatenate([[0.0], np.geomspace(1e-7, 300.0, 20000)])
+    integral = np.trapezoid(2 * np.pi * r * np.asarray(transport.profile(medium, jnp.asarray(r))), r)
+    assert integral == pytest.approx(float(transport.total_reflectance(medium)), rel=0.01)
+    mu, w = np.polynomial.legendre.leggauss(64)
+    mu, w = 0.5 * (mu + 1), 0.5 * w
+    near = jnp.array([1e-5, 1e-3, 0.1])
+    radiance = np.stack([np.asarray(transport.radiance(medium, near, m)) for m in mu], axis=-1)
+    np.testing.assert_allclose(2 * np.pi * radiance @ (w * mu), np.asarray(transport.profile(medium, near)),
+                               rtol=0.05)
