@@ -5,10 +5,13 @@ capped at --max-path transport lengths (the tail beyond is modelled, see
 jsss.transport_table). The walk is jsss.photon_walk, the engine of jsss.montecarlo: its
 numbers are counter-based, so a seed reproduces the tables bit for bit on one platform.
 
-Run from the repository root (float64; about 2 CPU-minutes per eta for 100 000 photons):
-``python scripts/generate_transport_tables.py [--photons 100000] [--seed 0] [--etas 1.0,1.1,...]``
-Several processes may each write a part (``--out part.npz --etas 1.0,1.1``) and
-``--merge part1.npz part2.npz`` joins them.
+Run from the repository root (float64; about 20 minutes on 2 cores for 500 000 photons):
+``python scripts/generate_transport_tables.py [--photons 500000] [--seeds 0,1] [--etas 1.0,1.1,...]``
+Several seeds are independent runs whose tables are averaged (each rounded to the shipped
+float32 first, so averaging files of single seeds gives the same bits). Several processes may
+each write a part (``--out part.npz --etas 1.0,1.1 --seeds 1``); ``--merge`` joins parts of
+other etas, and ``--average`` parts of the same etas from other seeds. The shipped tables:
+``--photons 500000 --seeds 0,1`` (two independent runs of 500 000 photons).
 """
 
 from __future__ import annotations
@@ -61,6 +64,21 @@ def build(etas, gs, *, photons, seed, max_path=MAX_PATH, lanes=4096, progress=Tr
                 photons=np.int64(photons), seed=np.int64(seed), max_path=np.float64(max_path))
 
 
+def average(tables):
+    """Tables of the same grids from independent seeds, as one table of all their photons."""
+    if len(tables) == 1:
+        return tables[0]
+    out = dict(tables[0])
+    k = len(tables)
+    out["exitance"] = (sum(t["exitance"].astype(np.float64) for t in tables) / k).astype(np.float32)
+    for key in ("total", "lost", "tail_mass"):
+        out[key] = sum(t[key] for t in tables) / k
+    out["error_total"] = np.sqrt(sum(t["error_total"] ** 2 for t in tables)) / k
+    out["photons"] = np.int64(sum(int(t["photons"]) for t in tables))
+    out["seed"] = np.array([int(s) for t in tables for s in np.atleast_1d(t["seed"])], np.int64)
+    return out
+
+
 def merge(paths):
     parts = [dict(np.load(p)) for p in paths]
     parts.sort(key=lambda p: p["etas"][0])
@@ -73,15 +91,19 @@ def merge(paths):
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--photons", type=int, default=100_000)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seeds", default="0", help="comma-separated seeds: independent runs, averaged")
     parser.add_argument("--etas", default=",".join(str(e) for e in ETAS))
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
-    parser.add_argument("--merge", nargs="+", type=Path)
+    parser.add_argument("--merge", nargs="+", type=Path, help="join parts that hold other etas")
+    parser.add_argument("--average", nargs="+", type=Path, help="average parts of the same etas from other seeds")
     args = parser.parse_args()
     if args.merge:
         tables = merge(args.merge)
+    elif args.average:
+        tables = average([dict(np.load(p)) for p in args.average])
     else:
-        tables = build([float(e) for e in args.etas.split(",")], GS, photons=args.photons, seed=args.seed)
+        etas = [float(e) for e in args.etas.split(",")]
+        tables = average([build(etas, GS, photons=args.photons, seed=int(seed)) for seed in args.seeds.split(",")])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     tmp = args.out.with_suffix(".tmp.npz")
     np.savez_compressed(tmp, **tables)
