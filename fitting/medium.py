@@ -217,7 +217,7 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
     if model not in MODELS:
         raise ValueError(f"fit_medium(model={model!r}): valid models are {MODELS}.")
     if model == "transport":
-        transport.profile(Medium(0.01, 1.0, jnp.asarray(eta)), 1.0, g=g)  # checks g and eta with a clear error
+        transport.check_supported(eta, g)
     measured = jnp.asarray(profile, dtype=jnp.result_type(float))
     warn_if_low_precision(measured, what="fit_medium", needs="its 1e-4 noise-free recovery (float64 fits)")
     if measured.ndim == 1:

@@ -37,7 +37,7 @@ from .fresnel import fresnel_reflectance
 from .medium import Medium
 from .numerics import append_axes, as_float_array, is_concrete
 
-__all__ = ["entry_transmittance", "profile", "radiance", "table_info", "total_reflectance"]
+__all__ = ["check_supported", "entry_transmittance", "profile", "radiance", "table_info", "total_reflectance"]
 
 _FLOOR = 1e-30  # added before taking logs: empty table cells (no photon reached them)
 
@@ -91,13 +91,25 @@ def _g_index(g) -> int:
     return int(matches[0])
 
 
+def check_supported(eta, g) -> None:
+    """Raise ``ValueError`` naming the value when the tables do not cover ``eta`` or ``g``.
+
+    For callers that take a model choice up front (fits, scene files, the command line)."""
+    _g_index(g)
+    _check_eta(eta)
+
+
+def _check_eta(eta):
+    etas = _tables()["etas"]
+    eta = np.asarray(eta, float)
+    if np.any(eta < etas[0] - 1e-9) or np.any(eta > etas[-1] + 1e-9):
+        raise ValueError(f"transport tables cover eta {etas[0]}-{etas[-1]}; got eta={eta.tolist()!r}.")
+
+
 def _check(medium: Medium):
     if not is_concrete(medium):
         return
-    etas = _tables()["etas"]
-    eta = np.asarray(medium.eta, float)
-    if np.any(eta < etas[0] - 1e-9) or np.any(eta > etas[-1] + 1e-9):
-        raise ValueError(f"transport tables cover eta {etas[0]}-{etas[-1]}; got eta={eta.tolist()!r}.")
+    _check_eta(medium.eta)
     if np.any(np.asarray(medium.sigma_s_prime, float) <= 0):
         raise ValueError("transport profiles need sigma_s_prime > 0 [1/mm]; got "
                          f"{np.asarray(medium.sigma_s_prime).tolist()!r}.")

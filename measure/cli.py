@@ -88,10 +88,10 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
     if pixel_mm <= 0:
         raise UsageError(f"--pixel-mm must be > 0; got {pixel_mm}")
     if model == "transport":
-        from jsss import Medium, transport
+        from jsss import transport
 
         try:
-            transport.profile(Medium(0.01, 1.0, float(eta)), 1.0, g=g)
+            transport.check_supported(eta, g)
         except ValueError as error:
             raise UsageError(f"--model transport: {error}") from None
     return fit_measurement(meas.pixels, ref.pixels, float(pixel_mm), float(eta),

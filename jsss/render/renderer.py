@@ -65,16 +65,16 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32) -
     eta = jnp.broadcast_to(jnp.asarray(eta), (3,))
     weights, variances = jnp.asarray(gs.weights, dtype), jnp.asarray(gs.variances, dtype)
     medium = scene.material.medium if medium is None else medium
-    if medium is not None and scene.material.kind == "medium" and scene.material.profile_model == "dipole":
-        # Image-space sampling draws from the dipole exactly; any other profile model is
-        # sampled through its Gaussian-sum fit (which matches the model's exact profile).
-        profile = SampledProfile(medium=jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), medium))
-    else:
-        profile = SampledProfile(weights=weights, variances=variances)
     if medium is not None and scene.material.kind == "medium":
         medium = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), medium)
     else:
         medium = None
+    if medium is not None and scene.material.profile_model == "dipole":
+        # Image-space sampling draws from the dipole exactly; any other profile model is
+        # sampled through its Gaussian-sum fit (which matches the model's exact profile).
+        profile = SampledProfile(medium=medium)
+    else:
+        profile = SampledProfile(weights=weights, variances=variances)
     return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile, medium)
 
 

@@ -270,7 +270,7 @@ def _material(t: _Table, source: str) -> Material:
             if material.medium is None:
                 t.fail("profile", f"'transport' needs a homogeneous medium; this material is {material.kind}.")
             try:
-                _transport.profile(material.medium, 1.0, g=g)
+                _transport.check_supported(material.medium.eta, g)
             except ValueError as error:
                 t.fail("profile", str(error))
         material = dataclasses.replace(material, profile_model=model, g=float(g))
