@@ -56,6 +56,8 @@ class MediumFit(eqx.Module):
         :math:`\\chi^2/(m - 2)` of the whitened residuals (about 1 for a good fit).
     n_iterations : Array
     converged : Array of bool
+        The solver met its tolerances *and* the estimate is determined: finite, with each
+        standard error smaller than its parameter (a run-away parameter is not converged).
     """
 
     medium: Medium
@@ -152,8 +154,13 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, k, grid
         rel = jnp.where(usable, binned / jnp.where(usable, meas, 1.0) - 1, 0.0)
         rel_rms = jnp.sqrt(jnp.sum(rel**2) / jnp.maximum(jnp.sum(usable), 1))
         sa, ss = jnp.exp(params[0]), jnp.exp(params[1])
-        return (sa, ss, sa * jnp.sqrt(cov[0, 0]), ss * jnp.sqrt(cov[1, 1]), model_total, rel_rms, chi2_red,
-                steps[best], ok[best])
+        sa_err, ss_err = sa * jnp.sqrt(cov[0, 0]), ss * jnp.sqrt(cov[1, 1])
+        # The solver stopping is not enough: a parameter that runs off (sigma_s' = 1e29 on a
+        # swapped image) "converges" with an error larger than itself. Converged means a
+        # determined estimate: finite, and each standard error below its value.
+        values = jnp.stack([sa, ss, sa_err, ss_err])
+        determined = jnp.all(jnp.isfinite(values)) & (sa_err < sa) & (ss_err < ss)
+        return (sa, ss, sa_err, ss_err, model_total, rel_rms, chi2_red, steps[best], ok[best] & determined)
 
     return jax.vmap(one, in_axes=(1, 1, 0, 0, 0, 0, 0))(measured, stderr, totals, total_errs, scale_errs, eta, starts)
 

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .fresnel import diffuse_fresnel_reflectance, internal_reflection_parameter
-from .numerics import as_float_array, is_concrete, safe_sqrt
+from .numerics import as_float_array, format_value, is_concrete, safe_sqrt
 
 __all__ = ["Medium", "reduced_albedo"]
 
@@ -32,9 +32,9 @@ def reduced_albedo(sigma_a, sigma_s_prime):
 def _check_nonnegative(name, value):
     array = np.asarray(value, dtype=float)
     if not np.all(np.isfinite(array)):
-        raise ValueError(f"Medium({name}=...) must be finite [1/mm]; got {value!r}.")
+        raise ValueError(f"Medium({name}=...) must be finite [1/mm]; got {format_value(value)}.")
     if np.any(array < 0):
-        raise ValueError(f"Medium({name}=...) must be >= 0 [1/mm]; got {value!r}.")
+        raise ValueError(f"Medium({name}=...) must be >= 0 [1/mm]; got {format_value(value)}.")
 
 
 class Medium(eqx.Module):
@@ -79,14 +79,14 @@ class Medium(eqx.Module):
             if not np.all(np.isfinite(eta_array)) or np.any(eta_array <= 0):
                 raise ValueError(
                     f"Medium(eta=...) must be finite and > 0 (the relative index of "
-                    f"refraction, 1.3 for skin); got {eta!r}."
+                    f"refraction, 1.3 for skin); got {format_value(eta)}."
                 )
             total = np.asarray(sigma_a, dtype=float) + np.asarray(sigma_s_prime, dtype=float)
             if np.any(total == 0):
                 raise ValueError(
                     "Medium(sigma_a=..., sigma_s_prime=...) must not both be 0 in a channel: "
-                    f"sigma_t' = 0 means light never interacts; got sigma_a={sigma_a!r}, "
-                    f"sigma_s_prime={sigma_s_prime!r}."
+                    f"sigma_t' = 0 means light never interacts; got sigma_a={format_value(sigma_a)}, "
+                    f"sigma_s_prime={format_value(sigma_s_prime)}."
                 )
         self.sigma_a = as_float_array(sigma_a)
         self.sigma_s_prime = as_float_array(sigma_s_prime)

@@ -17,6 +17,7 @@ __all__ = [
     "LowPrecisionWarning",
     "append_axes",
     "as_float_array",
+    "format_value",
     "is_concrete",
     "safe_sqrt",
     "warn_if_low_precision",
@@ -43,6 +44,24 @@ def as_float_array(value) -> jax.Array:
     if jnp.issubdtype(value.dtype, jnp.floating):
         return value
     return value.astype(jnp.result_type(float))
+
+
+def format_value(value) -> str:
+    """A number or array as a user wrote it (``1.3``, ``[nan, 1.3]``), not as a repr.
+
+    Error messages quote the value a user gave; ``Array([nan], dtype=float64)`` names an
+    internal type instead.
+    """
+    try:
+        array = np.asarray(value)
+        if not np.issubdtype(array.dtype, np.floating):
+            array = array.astype(float)
+    except (TypeError, ValueError):
+        return repr(value)
+    # str of a NumPy scalar is its shortest repr in its own dtype (float32 1.3 prints 1.3).
+    if array.ndim == 0:
+        return str(array[()])
+    return "[" + ", ".join(str(x) for x in array.reshape(-1)) + "]"
 
 
 @jax.custom_jvp

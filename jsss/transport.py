@@ -102,7 +102,7 @@ def check_supported(eta, g) -> None:
 def _check_eta(eta):
     etas = _tables()["etas"]
     eta = np.asarray(eta, float)
-    if np.any(eta < etas[0] - 1e-9) or np.any(eta > etas[-1] + 1e-9):
+    if not np.all((eta >= etas[0] - 1e-9) & (eta <= etas[-1] + 1e-9)):  # also refuses nan
         raise ValueError(f"transport tables cover eta {etas[0]}-{etas[-1]}; got eta={eta.tolist()!r}.")
 
 

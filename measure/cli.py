@@ -58,6 +58,7 @@ def _merge_frames(paths, saturation, dark):
 
 def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference_reflectance=0.99, model="dipole",
                   g=0.0, grid=None, saturation=None):
+    from .checks import MeasurementError
     from .exr import read_exr
     from .pipeline import fit_measurement
 
@@ -85,8 +86,10 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
             raise UsageError(f"{meas.path}: no pixel size in the header (jsss_pixel_mm); pass --pixel-mm")
     if eta is None or not np.isfinite(eta) or eta <= 0:
         raise UsageError(f"--eta must be > 0 (the relative index of refraction, e.g. 1.3); got {eta}")
-    if pixel_mm <= 0:
-        raise UsageError(f"--pixel-mm must be > 0; got {pixel_mm}")
+    if not (np.isfinite(pixel_mm) and pixel_mm > 0):
+        raise UsageError(f"--pixel-mm must be > 0 (the pixel size on the sample in mm); got {pixel_mm:g}")
+    if not (0 < reference_reflectance <= 1):  # also refuses nan
+        raise UsageError(f"--reference-reflectance must be in (0, 1] (0.99 for Spectralon); got {reference_reflectance:g}")
     if model == "transport":
         from jsss import transport
 
@@ -94,10 +97,13 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
             transport.check_supported(eta, g)
         except ValueError as error:
             raise UsageError(f"--model transport: {error}") from None
-    return fit_measurement(meas.pixels, ref.pixels, float(pixel_mm), float(eta),
-                           dark=None if dark_img is None else dark_img.pixels,
-                           reference_reflectance=reference_reflectance, model=model, g=g, channels=meas.channels,
-                           grid=grid)
+    try:
+        return fit_measurement(meas.pixels, ref.pixels, float(pixel_mm), float(eta),
+                               dark=None if dark_img is None else dark_img.pixels,
+                               reference_reflectance=reference_reflectance, model=model, g=g,
+                               channels=meas.channels, grid=grid)
+    except MeasurementError as error:
+        raise UsageError(f"{meas.path} with reference {ref.path}: {error}") from None
 
 
 def _check_saturation(image):
@@ -159,8 +165,16 @@ def _single(args) -> int:
     return 0
 
 
+def _warn_quality(table, stream=sys.stderr):
+    """One warning line per channel whose residual is far beyond its noise model."""
+    for channel, quality in zip(table["channels"], table["quality"]):
+        if quality != "ok":
+            print(f"{PROG}: warning: channel {channel}: {quality}", file=stream)
+
+
 def _report(result, args, truth=None):
     table = result.table()
+    _warn_quality(table)
     if args.plot:
         _plot(result, args.plot)
     if args.json:
@@ -256,7 +270,7 @@ def _rows(jobs, args):
                                    model=args.model, g=args.g, grid=grid)
             table = result.table()
             for key in ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance",
-                        "mean_free_path_mm", "rel_residual", "converged"):
+                        "mean_free_path_mm", "rel_residual", "chi2_reduced", "converged", "quality"):
                 for ch, value in zip(table["channels"], table[key]):
                     row[f"{key}_{ch}"] = value
         except Exception as error:  # recorded in the table, never dropped
@@ -269,7 +283,8 @@ def _rows(jobs, args):
 def _write_table(rows, out):
     """Write CSV (or Parquet) to a temp file beside ``out``, then rename: no partial tables."""
     out = Path(out)
-    columns = ["file", "status", "error"] + sorted({k for r in rows for k in r} - {"file", "status", "error"})
+    # Columns in the order the rows hold them (the image's channel order, e.g. R, G, B), not sorted.
+    columns = list(dict.fromkeys(["file", "status", "error"] + [k for r in rows for k in r]))
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
     os.close(fd)

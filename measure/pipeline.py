@@ -12,7 +12,9 @@ import numpy as np
 
 from fitting.medium import MediumFit, fit_medium
 
-from .profile import Calibrated, RadialProfile, beam_center, beam_sigma, calibrate, check_image, radial_profile
+from .checks import check_measurement, fit_quality
+from .profile import (Calibrated, RadialProfile, beam_center, beam_sigma, beam_window_mm, calibrate, check_image,
+                      radial_profile)
 
 __all__ = ["MeasurementFit", "fit_measurement"]
 
@@ -30,6 +32,11 @@ class MeasurementFit:
     model: str = "dipole"
     g: float = 0.0
 
+    @property
+    def quality(self) -> list[str]:
+        """Per channel ``"ok"`` or ``"poor: ..."`` from chi^2/dof (:func:`measure.checks.fit_quality`)."""
+        return fit_quality(self.fit.chi2_reduced)
+
     def table(self) -> dict:
         """Per-channel results as plain lists (the JSON and CSV schema)."""
         f = self.fit
@@ -46,6 +53,8 @@ class MeasurementFit:
             "mean_free_path_mm": as_list(1.0 / (np.asarray(f.medium.sigma_a) + np.asarray(f.medium.sigma_s_prime))),
             "rel_residual": as_list(f.rel_residual),
             "converged": [bool(x) for x in np.asarray(f.converged).reshape(-1)],
+            "chi2_reduced": as_list(f.chi2_reduced),
+            "quality": self.quality,
             "model": self.model,
             "g": self.g,
         }
@@ -75,16 +84,26 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     Hankel grid of the model (build one with :func:`jsss.hankel.hankel_grid` and pass it
     when fitting many measurements). ``model`` and ``g`` choose the profile model (see
     :func:`fitting.medium.fit_medium`).
+
+    Raises
+    ------
+    measure.checks.MeasurementError
+        Images that cannot be a measurement: no signal above the noise, a reference that
+        is not a beam, a sample narrower than its beam (:func:`measure.checks.check_measurement`).
     """
     calibrated = calibrate(measurement, reference, pixel_mm, reference_reflectance=reference_reflectance, dark=dark)
     offset = 0 if dark is None else np.asarray(dark, dtype=float)
     meas = check_image(measurement, name="measurement") - offset
     ref = check_image(reference, name="reference") - offset
     center = beam_center(ref)
-    sigma = beam_sigma(ref, center, pixel_mm)
+    window = beam_window_mm(ref, pixel_mm)
+    sigma = beam_sigma(ref, center, pixel_mm, radius_mm=window)
+    meas_sum, meas_var = meas.sum(axis=(0, 1)), _sum_variance(meas, center, pixel_mm)
+    check_measurement(meas, ref, center=center, pixel_mm=pixel_mm, window_mm=window, beam_sigma_mm=sigma,
+                      signal=meas_sum, signal_stderr=np.sqrt(meas_var), channels=channels)
     # The measurement's own noise enters the total; the reference's sum scales the profile
     # and the total alike, so its error is passed separately as a shared scale error.
-    meas_relative_var = _sum_variance(meas, center, pixel_mm) / meas.sum(axis=(0, 1)) ** 2
+    meas_relative_var = meas_var / meas_sum**2
     scale_stderr = np.sqrt(_sum_variance(ref, center, pixel_mm)) / ref.sum(axis=(0, 1))
     total_stderr = np.abs(calibrated.total_reflectance) * np.sqrt(meas_relative_var)
     r_min = r_min_mm or max(2 * pixel_mm, 2 * sigma)

@@ -22,6 +22,7 @@ __all__ = [
     "RadialProfile",
     "beam_center",
     "beam_sigma",
+    "beam_window_mm",
     "calibrate",
     "check_image",
     "merge_brackets",
@@ -65,9 +66,9 @@ def calibrate(measurement, reference, pixel_mm: float, *, reference_reflectance:
             raise ValueError(f"`dark` {dark.shape} does not match `measurement` {meas.shape}.")
         meas, ref = meas - dark, ref - dark
     if not (0 < reference_reflectance <= 1):
-        raise ValueError(f"reference_reflectance must be in (0, 1]; got {reference_reflectance!r}.")
-    if pixel_mm <= 0:
-        raise ValueError(f"pixel_mm must be > 0; got {pixel_mm!r}.")
+        raise ValueError(f"reference_reflectance must be in (0, 1]; got {reference_reflectance:g}.")
+    if not (np.isfinite(pixel_mm) and pixel_mm > 0):
+        raise ValueError(f"pixel_mm must be finite and > 0 [mm]; got {pixel_mm:g}.")
     ref_sum = ref.sum(axis=(0, 1))
     if np.any(ref_sum <= 0):
         raise ValueError("`reference` holds no light after dark subtraction (its sum is <= 0 in some channel).")
@@ -101,6 +102,13 @@ def beam_center(image, *, iterations: int = 5) -> tuple[float, float]:
     return center
 
 
+def beam_window_mm(reference, pixel_mm: float) -> float:
+    """The window [mm] of :func:`beam_sigma`: 10x the radius at half maximum, at least 5 pixels."""
+    image = check_image(reference, name="reference").sum(axis=-1)
+    rough = np.sqrt(max(np.count_nonzero(image > 0.5 * image.max()), 1) / np.pi) * pixel_mm
+    return max(10 * rough, 5 * pixel_mm)
+
+
 def beam_sigma(reference, center, pixel_mm: float, *, radius_mm: float | None = None) -> float:
     r"""Standard deviation [mm] of the beam from the reference's second moment, :math:`\langle r^2\rangle = 2\sigma^2`.
 
@@ -111,9 +119,7 @@ def beam_sigma(reference, center, pixel_mm: float, *, radius_mm: float | None = 
     rows, cols = np.indices(image.shape)
     r2 = ((rows - center[0]) ** 2 + (cols - center[1]) ** 2) * pixel_mm**2
     if radius_mm is None:
-        half = image > 0.5 * image.max()
-        rough = np.sqrt(max(half.sum(), 1) / np.pi) * pixel_mm  # radius at half maximum
-        radius_mm = max(10 * rough, 5 * pixel_mm)
+        radius_mm = beam_window_mm(reference, pixel_mm)
     inside = r2 <= radius_mm**2
     weights = np.clip(image, 0, None) * inside
     return float(np.sqrt((weights * r2).sum() / (2 * weights.sum())))

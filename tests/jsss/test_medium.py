@@ -64,3 +64,12 @@ def test_integer_inputs_become_floats_and_float32_is_kept():
     assert jnp.issubdtype(Medium(0, 1, 1).sigma_a.dtype, jnp.floating)
     m32 = Medium(np.float32(0.1), np.float32(1.0), np.float32(1.3))
     assert m32.dtype == jnp.float32
+
+
+def test_bad_values_are_quoted_as_values_not_as_array_reprs():
+    """A jnp array in an error message reads as the numbers (before: `Array([nan, ...], dtype=...)`)."""
+    import jax.numpy as jnp
+
+    with pytest.raises(ValueError) as info:
+        Medium(0.1, 1.0, jnp.array([jnp.nan, 1.3], jnp.float32))
+    assert "got [nan, 1.3]." in str(info.value) and "Array" not in str(info.value)

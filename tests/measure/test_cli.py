@@ -81,6 +81,9 @@ def test_batch_writes_every_row_atomically_and_reports_failures(measurements, tm
         assert status[name]["status"] == "ok"
         estimate = [float(status[name][f"sigma_a_{c}"]) for c in "RGB"]
         np.testing.assert_allclose(estimate, np.asarray(medium.sigma_a), rtol=0.05)
+        assert [status[name][f"quality_{c}"] for c in "RGB"] == ["ok"] * 3
+    header = next(csv.reader(out_csv.open()))
+    assert [h for h in header if h.startswith("sigma_a_") and "err" not in h] == ["sigma_a_R", "sigma_a_G", "sigma_a_B"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv"]
     assert "3/3" in out.stderr  # the progress bar ran to the end
 
@@ -105,6 +108,11 @@ def test_manifest_lists_measurements(measurements, tmp_path):
         ("no_reference", "--reference REF.exr is required"),
         ("shape", "differs from"),
         ("g", "--model transport: transport tables exist for g in"),
+        ("black", "has no signal above the noise in channel R"),
+        ("swapped", "the reference is not a beam"),
+        ("self", "the measurement and the reference are the same image"),
+        ("narrow", "the measurement is narrower than its reference beam"),
+        ("bad_reflectance", "--reference-reflectance must be in (0, 1] (0.99 for Spectralon); got nan"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path):
@@ -132,12 +140,41 @@ def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path
         args = [d / "skin1.exr"]
     elif case == "g":
         args = [d / "skin1.exr", "--reference", ref, "--model", "transport", "--g", 0.3]
+    elif case == "black":  # before: sigma_a = 99.9 with errors of 0, exit 0
+        args = [write_exr(tmp_path / "zeros.exr", np.zeros((128, 128, 3))), "--reference", ref, "--pixel-mm", 0.05]
+    elif case == "swapped":  # before: sigma_s' = 1e29 +- 1e44, converged
+        args = [ref, "--reference", d / "skin1.exr", "--dark", d / "skin1_dark.exr"]
+    elif case == "self":  # before: R_d = 1.0000, residual 0.71
+        args = [d / "skin1.exr", "--reference", d / "skin1.exr"]
+    elif case == "narrow":  # a beam of 0.05 mm "measured" against a reference beam of 0.15 mm
+        rows, cols = np.indices((128, 128)) - 63.5
+        beam = lambda sigma_px: np.repeat(np.exp(-(rows**2 + cols**2) / (2 * sigma_px**2))[..., None], 3, -1)  # noqa: E731
+        args = [write_exr(tmp_path / "narrow.exr", 0.3 * beam(1.0)), "--reference",
+                write_exr(tmp_path / "wide.exr", beam(3.0)), "--pixel-mm", 0.05]
+    elif case == "bad_reflectance":
+        args = [d / "skin1.exr", "--reference", ref, "--reference-reflectance", "nan"]
     else:
         args = [write_exr(tmp_path / "small.exr", np.ones((8, 8, 3))), "--reference", ref, "--pixel-mm", 0.05]
     out = run(*args)
     assert out.returncode == 2
     assert expected in out.stderr
     assert "Traceback" not in out.stderr and out.stderr.strip().count("\n") == 0
+
+
+def test_wrong_eta_warns_and_records_a_poor_quality(measurements):
+    """skin1 (eta 1.3) fitted at eta 1.1: chi^2/dof in the tens to hundreds (measured 28-843
+    on 256-pixel images); before, no word of warning. Now one warning line per channel names
+    the likely causes, and the JSON's `quality` says `poor`; the right eta gives `ok`."""
+    d = measurements
+    common = [d / "skin1.exr", "--reference", d / "skin1_ref.exr", "--dark", d / "skin1_dark.exr", "--json"]
+    wrong = run(*common, "--eta", 1.1)
+    assert wrong.returncode == 0, wrong.stderr
+    table = json.loads(wrong.stdout)
+    assert all(q.startswith("poor") for q in table["quality"]) and min(table["chi2_reduced"]) > 4
+    warnings = [line for line in wrong.stderr.splitlines() if "warning" in line]
+    assert len(warnings) == 3 and all("wrong eta" in w for w in warnings)
+    right = run(*common, "--eta", 1.3)
+    assert json.loads(right.stdout)["quality"] == ["ok"] * 3 and "warning" not in right.stderr
 
 
 def test_exposure_brackets_are_merged_before_the_fit(tmp_path):

@@ -113,3 +113,17 @@ def test_reported_standard_errors_match_the_actual_errors(grid):
     z = np.array(z)
     assert np.all(np.abs(z) < 5), np.round(z, 1)
     assert 0.5 < z.std() < 2.0
+
+
+def test_a_run_away_fit_is_not_converged(monkeypatch):
+    """Measurement and reference swapped, with the input checks bypassed: the solver stops
+    (before: `converged: true` with sigma_s' = 1e29 +- 1e44), but a parameter whose standard
+    error exceeds it is not determined, so `converged` is false and the quality is poor."""
+    import measure.pipeline as pipeline
+
+    synthetic = synthesize(jensen2001("skin1"), size=128, photons_per_unit=1e5, seed=3)
+    monkeypatch.setattr(pipeline, "check_measurement", lambda *a, **k: None)
+    result = pipeline.fit_measurement(synthetic.reference, synthetic.measurement, 0.05, 1.3, dark=synthetic.dark)
+    table = result.table()
+    assert not any(table["converged"])
+    assert all(q.startswith("poor") for q in table["quality"])
