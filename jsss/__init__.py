@@ -24,8 +24,21 @@ from . import (
 from .medium import Medium as Medium
 from .medium import reduced_albedo as reduced_albedo
 
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("jsss")
+    except PackageNotFoundError:  # a source tree that was not installed
+        return "unknown"
+
+
+__version__ = _version()
+
 __all__ = [
     "Medium",
+    "__version__",
     "brdf",
     "dipole",
     "fresnel",

@@ -11,6 +11,9 @@ def main(argv=None) -> int:
         description="Print the measured materials of Jensen et al. 2001 (Fig. 5b) with the "
         "dipole's total diffuse reflectance computed beside the published one.",
     )
+    from . import __version__
+
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     parser.parse_args(argv)
 
     import jax

@@ -12,6 +12,7 @@ Bad input gives a one-line error and exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import glob
 import json
@@ -155,9 +156,16 @@ def _plot(result, path):
     plt.close(fig)
 
 
+def _say(args, message):
+    """A progress line on stderr for the silent seconds (reading, compiling): terminals only, not with --quiet."""
+    if not getattr(args, "quiet", False) and sys.stderr.isatty():
+        print(f"{PROG}: {message}", file=sys.stderr, flush=True)
+
+
 def _single(args) -> int:
     if not args.reference:
         raise UsageError("--reference REF.exr is required (or use --demo)")
+    _say(args, f"fitting {args.model} to {len(args.measurement)} frame(s) (the first fit compiles: 10-20 s)")
     result = _load_and_fit(args.measurement, args.reference, pixel_mm=args.pixel_mm, eta=args.eta, dark=args.dark,
                            reference_reflectance=args.reference_reflectance, model=args.model, g=args.g,
                            saturation=args.saturation)
@@ -201,12 +209,18 @@ def _demo(args) -> int:
     from .synth import synthesize, write_measurement
 
     marble = jensen2001("marble")
-    with tempfile.TemporaryDirectory(prefix="jsss-demo-") as tmp:
+    with contextlib.ExitStack() as stack:
+        # Without --keep the files live only as long as the fit; say so rather than name a folder that vanishes.
+        directory = Path(args.keep) if args.keep else Path(stack.enter_context(
+            tempfile.TemporaryDirectory(prefix="jsss-demo-")))
         synthetic = synthesize(marble, pixel_mm=0.05, size=256, beam_sigma_mm=0.05, photons_per_unit=1e5, seed=1)
-        paths = write_measurement(tmp, synthetic, name="marble")
+        paths = write_measurement(directory, synthetic, name="marble")
         if not args.json:
+            where = (f"written to {directory} (marble.exr, marble_ref.exr, marble_dark.exr, marble.json)" if args.keep
+                     else "(temporary files; --keep DIR keeps them)")
             print(f"demo: synthetic marble measurement (256 x 256 px, 0.05 mm pixels, Gaussian beam 0.05 mm, "
-                  f"shot and read noise) written to {tmp}")
+                  f"shot and read noise) {where}")
+        _say(args, f"fitting {args.model} (the first fit compiles: 10-20 s)")
         result = _load_and_fit(paths["measurement"], paths["reference"], pixel_mm=None, eta=1.5,
                                dark=paths.get("dark"), model=args.model, g=args.g)
     _report(result, args, truth=synthetic.truth)
@@ -235,6 +249,9 @@ def _find_jobs(target, manifest):
                              (base / row["dark"]) if row.get("dark") else None, overrides))
         return jobs
     path = Path(target)
+    if not path.is_dir() and not glob.has_magic(str(target)):
+        raise UsageError(f"{target}: no such directory" + ("" if not path.exists() else " (a file: give its directory, "
+                                                           "a glob or --manifest)"))
     candidates = sorted(path.glob("*.exr")) if path.is_dir() else sorted(Path(p) for p in glob.glob(str(target)))
     candidates = [p for p in candidates if not _ROLE.search(p.stem)]
     if not candidates:
@@ -318,11 +335,13 @@ def _batch(argv) -> int:
     parser.add_argument("--manifest", help="CSV listing the measurements instead of the naming rule")
     parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
     parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
-    parser.add_argument("--reference-reflectance", type=float, default=0.99)
+    parser.add_argument("--reference-reflectance", type=float, default=0.99,
+                        help="total reflectance of the reference (default 0.99, Spectralon)")
     parser.add_argument("--model", default="dipole", choices=["dipole", "transport"],
                         help="profile model: dipole (diffusion) or transport (scaled Monte Carlo tables)")
     parser.add_argument("--g", type=float, default=0.0,
                         help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9)")
+    parser.add_argument("--version", action="version", version=_version())
     args = parser.parse_args(argv)
     if not args.target and not args.manifest:
         raise UsageError("batch needs a directory/glob or --manifest")
@@ -338,6 +357,12 @@ def _batch(argv) -> int:
 
 
 # ----------------------------------------------------------------------------- entry point
+def _version() -> str:
+    from jsss import __version__
+
+    return f"{PROG} (jsss) {__version__}"
+
+
 def _parser():
     parser = argparse.ArgumentParser(prog=PROG, description=(
         "Recover sigma_a and sigma_s' per channel from a beam-profile HDR image and a white reference "
@@ -359,6 +384,11 @@ def _parser():
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--plot", help="write a PNG of the profile and the fit")
     parser.add_argument("--demo", action="store_true", help="fit a synthetic marble measurement")
+    parser.add_argument("--keep", metavar="DIR",
+                        help="with --demo: write the demo's EXRs (and the truth as JSON) to DIR and keep them")
+    parser.add_argument("-q", "--quiet", action="store_true",
+                        help="no progress lines (they go to stderr, and only when it is a terminal)")
+    parser.add_argument("--version", action="version", version=_version())
     return parser
 
 
@@ -369,6 +399,8 @@ def main(argv=None) -> int:
             return _batch(argv[1:])
         args = _parser().parse_args(argv)
         _enable_x64()
+        if args.keep and not args.demo:
+            raise UsageError("--keep DIR goes with --demo (it keeps the demo's images)")
         if args.demo:
             return _demo(args)
         if not args.measurement:

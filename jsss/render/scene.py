@@ -34,6 +34,7 @@ Every problem is reported as ``file: [table] key: what is wrong`` (:class:`Scene
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -162,12 +163,20 @@ class _Table:
             self.fail(key, f"must be one of {', '.join(choices)}; got {value!r}.")
         return value
 
-    def check_unknown(self):
-        unknown = sorted(set(self.data) - self.used)
+    def check_unknown(self, known=None):
+        """Refuse keys not read (or not in ``known``), suggesting the nearest valid name."""
+        valid = self.used if known is None else set(known)
+        unknown = sorted(set(self.data) - valid)
         if unknown:
-            self.fail(unknown[0], "unknown key (misspelt?).")
+            close = difflib.get_close_matches(unknown[0], sorted(valid), n=1)
+            hint = f" did you mean {close[0]!r}?" if close else f" valid: {', '.join(sorted(valid))}."
+            value = self.data[unknown[0]]
+            tables = isinstance(value, dict) or (isinstance(value, list) and value and all(isinstance(v, dict) for v in value))
+            kind = "section" if tables else "key"
+            self.fail(unknown[0], f"unknown {kind} (misspelt?);{hint}")
 
 
+_SECTIONS = ("geometry", "material", "lights", "camera", "render")
 _SHAPES = ("sphere", "plane", "box", "fin", "obj")
 
 
@@ -312,6 +321,8 @@ def _camera(t: _Table) -> PerspectiveView:
 def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".") -> Scene:
     """Build a :class:`Scene` from a TOML-shaped dict (see the module docstring)."""
     root = _Table(data, "scene", source)
+    # Unknown sections first: a misspelt [materail] must not be reported as a missing [material].
+    root.check_unknown(_SECTIONS)
     mesh = _geometry(_Table(root.raw("geometry"), "geometry", source), Path(base_dir))
     material = _material(_Table(root.raw("material"), "material", source), source)
     entries = root.raw("lights")

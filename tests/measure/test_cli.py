@@ -161,6 +161,24 @@ def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path
     assert "Traceback" not in out.stderr and out.stderr.strip().count("\n") == 0
 
 
+def test_demo_keeps_its_images_with_keep(tmp_path):
+    """--demo --keep DIR leaves the demo's EXRs and truth (before: it named a folder it deleted);
+    the kept files fit again from the command line; --keep without --demo is refused."""
+    out = run("--demo", "--keep", tmp_path / "demo")
+    assert out.returncode == 0, out.stderr
+    assert {"marble.exr", "marble_ref.exr", "marble_dark.exr", "marble.json"} <= {p.name for p in (tmp_path / "demo").iterdir()}
+    assert str(tmp_path / "demo") in out.stdout
+    alone = run(tmp_path / "demo" / "marble.exr", "--keep", tmp_path / "x")
+    assert alone.returncode == 2 and "--keep DIR goes with --demo" in alone.stderr
+
+
+def test_batch_names_a_missing_directory(tmp_path):
+    """before: `no measurement EXRs found`; now the directory is named as missing."""
+    out = run("batch", tmp_path / "nosuchdir", "--out", tmp_path / "t.csv")
+    assert out.returncode == 2 and "nosuchdir: no such directory" in out.stderr
+    assert not (tmp_path / "t.csv").exists()
+
+
 def test_wrong_eta_warns_and_records_a_poor_quality(measurements):
     """skin1 (eta 1.3) fitted at eta 1.1: chi^2/dof in the tens to hundreds (measured 28-843
     on 256-pixel images); before, no word of warning. Now one warning line per channel names

@@ -27,6 +27,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.a
     (lambda d: d["render"].update(accuracy=2.0), r"\[render\] accuracy"),
     (lambda d: d.pop("camera"), r"\[scene\] camera: missing"),
     (lambda d: d["material"].update(sigma_a=[0.1] * 3), r"give exactly one of"),
+    # before: "[scene] material: missing (required)."
+    (lambda d: d.update(materail=d.pop("material")),
+     r"\[scene\] materail: unknown section \(misspelt\?\); did you mean 'material'\?"),
+    (lambda d: d["camera"].update(fvo=30), r"\[camera\] fvo: unknown key \(misspelt\?\); did you mean 'fov'\?"),
 ])
 def test_bad_scenes_name_the_key_and_the_problem(change, message):
     data = scene_dict()
@@ -114,3 +118,40 @@ def test_command_line_method_override_renders_with_it(tmp_path):
     assert "method: image-space -- set by the caller" in out.stdout and "4 samples per pixel" in out.stdout
     bad = _run(str(scene), "--samples", "0", "--method", "image-space", cwd=tmp_path)
     assert bad.returncode == 2 and "samples" in bad.stderr
+
+
+SMALL_SCENE = ('[geometry]\nshape = "sphere"\nradius = 15\nsegments = 16\nrings = 8\n'
+               '[material]\nname = "marble"\n[[lights]]\ntype = "directional"\ndirection = [0.5, 1, -0.5]\n'
+               '[camera]\nposition = [0, -90, 20]\nresolution = [16, 12]\n[render]\ntexture_size = 32\n')
+
+
+def test_command_line_renders_several_scenes_and_reports_the_bad_one(tmp_path):
+    """Several scenes in one call (before: one per call): -o is then a directory; a bad scene
+    is one error line while the others still render, and the exit status is 2."""
+    for name in ("a", "b"):
+        (tmp_path / f"{name}.toml").write_text(SMALL_SCENE)
+    (tmp_path / "bad.toml").write_text(SMALL_SCENE.replace("[material]", "[materail]"))
+    out = _run("a.toml", "bad.toml", "b.toml", "-o", "renders", "--method", "lambert", "--no-exr", cwd=tmp_path)
+    assert out.returncode == 2
+    assert sorted(p.name for p in (tmp_path / "renders").iterdir()) == ["a.png", "b.png"]
+    errors = [line for line in out.stderr.splitlines() if "error" in line]
+    assert len(errors) == 1 and "bad.toml: [scene] materail: unknown section" in errors[0]
+
+
+def test_every_command_has_a_version_and_plain_help():
+    """--version on jsss-render, fit-params and fit-params batch; help text without reST markup
+    (before: ``jsss-render``: in the description), and every batch option explained."""
+    import jsss
+
+    for module, extra in (("jsss.render.cli", []), ("measure.cli", []), ("measure.cli", ["batch"]), ("jsss.cli", [])):
+        out = subprocess.run([sys.executable, "-m", module, *extra, "--version"], capture_output=True, text=True,
+                             stdin=subprocess.DEVNULL, timeout=120)
+        assert out.returncode == 0 and jsss.__version__ in out.stdout, (module, extra, out.stderr)
+        help_text = subprocess.run([sys.executable, "-m", module, *extra, "--help"], capture_output=True, text=True,
+                                   stdin=subprocess.DEVNULL, timeout=120).stdout
+        assert "``" not in help_text and ":math:" not in help_text, (module, extra)
+        lines = help_text.splitlines() + [""]
+        # An option's help follows its name after two spaces, or on the next, indented line.
+        bare = [line for line, after in zip(lines, lines[1:]) if line.startswith("  -")
+                and "  " not in line.strip() and not after.startswith(" " * 10)]
+        assert not bare, (module, extra, bare)
