@@ -18,6 +18,11 @@ biased near the source on real materials (diffusion theory). ``"transport"`` is
 :func:`jsss.transport.profile`, exact to radiative transfer up to its tables' Monte Carlo
 noise (g given by the caller), taken to the same spectrum by the grid's forward Hankel
 transform; everything after the spectrum is shared.
+
+What is measured is a parameter too: exitance (a tally of the light leaving), or what a
+camera records, radiance toward it (``view_cos``; see :func:`fit_medium`). Near the source
+the two differ by 20-40 % under transport (light leaves at grazing angles there), so a
+camera's image fitted as exitance is biased even with an exact profile.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import numpy as np
 import optimistix as optx
 
 from jsss import dipole, hankel, transport
+from jsss.fresnel import exit_lobe
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
 
@@ -83,11 +89,28 @@ def _interpolation_rows(grid_r, radii, rows, n_rows, scale):
     return matrix
 
 
-def _spectrum_and_total(model, g, medium, k, grid_r, forward_matrix):
-    """The profile's Hankel spectrum on ``k`` and its whole-plane total, for ``model``."""
+def _spectrum_and_total(model, g, view_cos, medium, k, grid_r, forward_matrix):
+    r"""The observable's Hankel spectrum on ``k`` and its whole-plane total, for ``model``.
+
+    The observable is the exitance per unit entering flux (``view_cos`` None), or the
+    camera's radiance factor :math:`\pi (1 - F(0)) L(r, \theta)`: radiance toward the camera
+    per unit *incident* flux, times pi (what a white-reference calibration of a camera image
+    gives, see :func:`fit_medium`).
+    """
+    if view_cos is None:
+        if model == "transport":
+            return forward_matrix @ transport.profile(medium, grid_r, g=g), transport.total_reflectance(medium, g=g)
+        return dipole.spectrum(medium, k), dipole.total_reflectance(medium)
+    entering = transport.entry_transmittance(medium.eta)
     if model == "transport":
-        return forward_matrix @ transport.profile(medium, grid_r, g=g), transport.total_reflectance(medium, g=g)
-    return dipole.spectrum(medium, k), dipole.total_reflectance(medium)
+        observable = jnp.pi * entering * transport.radiance(medium, grid_r, view_cos, g=g)
+        # whole plane: the trapezoid in log r of 2 pi r^2 f (the grid spans 1e-6..1e4 mm or so)
+        log_r = jnp.log(grid_r)
+        integrand = 2 * jnp.pi * (grid_r**2)[:, None] * observable.reshape(grid_r.shape[0], -1)
+        total = jnp.sum(0.5 * (integrand[1:] + integrand[:-1]) * jnp.diff(log_r)[:, None], axis=0)
+        return forward_matrix @ observable, total.reshape(observable.shape[1:])
+    factor = jnp.pi * entering * exit_lobe(view_cos, medium.eta)  # the diffusion exit law
+    return dipole.spectrum(medium, k) * factor, dipole.total_reflectance(medium) * factor
 
 
 def _model(params, args):
@@ -98,9 +121,9 @@ def _model(params, args):
     one precomputed matrix: the model costs a spectrum and a mat-vec.
     """
     log_sa, log_ss = params
-    (model, g), eta, k, grid_r, forward_matrix, beam_sigma, bins_from_spectrum, total_from_spectrum = args
+    (model, g, view_cos), eta, k, grid_r, forward_matrix, beam_sigma, bins_from_spectrum, total_from_spectrum = args
     medium = Medium(jnp.exp(log_sa), jnp.exp(log_ss), eta)
-    spectrum, plane_total = _spectrum_and_total(model, g, medium, k, grid_r, forward_matrix)
+    spectrum, plane_total = _spectrum_and_total(model, g, view_cos, medium, k, grid_r, forward_matrix)
     spectrum = spectrum * jnp.exp(-(k**2) * beam_sigma**2 / 2)
     total = plane_total if total_from_spectrum is None else total_from_spectrum @ spectrum
     return bins_from_spectrum @ spectrum, total
@@ -176,10 +199,11 @@ def _starting_points(totals, eta, n_starts):
 
 def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectance=None, total_stderr=None,
                field_radii=None, pixel_area: float | None = None, scale_stderr=None,
-               beam_sigma: float = 0.0, model: str = "dipole", g: float = 0.0, n_starts: int = 7,
+               beam_sigma: float = 0.0, model: str = "dipole", g: float = 0.0, view_cos: float | None = None,
+               n_starts: int = 7,
                max_steps: int = 200,
                rtol: float = 1e-10, atol: float = 1e-12, grid: hankel.HankelGrid | None = None) -> MediumFit:
-    """Fit sigma_a and sigma_s' per channel to binned radial profiles.
+    r"""Fit sigma_a and sigma_s' per channel to binned radial profiles.
 
     Parameters
     ----------
@@ -211,6 +235,15 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
     g : float, keyword-only
         Henyey-Greenstein mean cosine of the material, for ``model="transport"`` (one of the
         tabulated 0, 0.5, 0.8, 0.9); the dipole depends on sigma_s' only.
+    view_cos : float, optional, keyword-only
+        None (default): ``profile`` is the exitance per unit entering flux (a tally of light
+        leaving, e.g. a Monte Carlo profile). A cosine in (0, 1]: ``profile`` is a camera's
+        view at that angle calibrated by a white Lambertian reference,
+        :math:`\pi (1 - F(0)) L(r, \theta)` per unit incident flux (the beam loses
+        :math:`F(0)` at entry; a white reference of reflectance :math:`\rho` shows radiance
+        :math:`\rho E / \pi`, so ``rho * pixel / (A * sum(reference))`` is this quantity).
+        The transport model uses :func:`jsss.transport.radiance`, the dipole the diffusion
+        exit law :func:`jsss.fresnel.exit_lobe`.
     n_starts : int, keyword-only
         Starting mean free paths (log-spaced from 0.01 to 10 mm).
     grid : HankelGrid, optional, keyword-only
@@ -225,6 +258,9 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
         raise ValueError(f"fit_medium(model={model!r}): valid models are {MODELS}.")
     if model == "transport":
         transport.check_supported(eta, g)
+    if view_cos is not None and not 0 < float(view_cos) <= 1:
+        raise ValueError(f"fit_medium(view_cos=...) must lie in (0, 1] (the cosine of the camera's angle to the "
+                         f"normal) or be None for exitance; got {view_cos}.")
     measured = jnp.asarray(profile, dtype=jnp.result_type(float))
     warn_if_low_precision(measured, what="fit_medium", needs="its 1e-4 noise-free recovery (float64 fits)")
     if measured.ndim == 1:
@@ -261,6 +297,7 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
     out = _fit_channels(measured, errors, totals, total_errs, scale_errs, eta, jnp.asarray(grid.k, measured.dtype),
                         jnp.asarray(grid.r, measured.dtype), jnp.asarray(grid.forward_matrix, measured.dtype),
                         jnp.asarray(beam_sigma, measured.dtype), bins_from_spectrum, total_from_spectrum,
-                        (log_sa, log_ss), max_steps=max_steps, rtol=rtol, atol=atol, model=(model, float(g)))
+                        (log_sa, log_ss), max_steps=max_steps, rtol=rtol, atol=atol,
+                        model=(model, float(g), None if view_cos is None else float(view_cos)))
     sa, ss, sa_err, ss_err, total, rel, chi2, steps, ok = out
     return MediumFit(Medium(sa, ss, eta), sa_err, ss_err, total, rel, chi2, steps, ok)

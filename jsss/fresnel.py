@@ -17,6 +17,7 @@ from .numerics import as_float_array, safe_sqrt
 __all__ = [
     "diffuse_fresnel_reflectance",
     "diffuse_fresnel_transmittance",
+    "exit_lobe",
     "fresnel_reflectance",
     "fresnel_transmittance",
     "internal_reflection_parameter",
@@ -155,6 +156,29 @@ def diffuse_fresnel_transmittance(eta):
     mu = lower[..., None] + half * (nodes + 1)
     transmitted = fresnel_transmittance(mu, eta[..., None])
     return (transmitted * 2 * mu * weights * half).sum(-1)
+
+
+def exit_lobe(cos_exit, eta):
+    r"""Radiance per unit exitance leaving toward ``cos_exit`` under the diffusion exit law [1/sr].
+
+    .. math:: L / M = \frac{F_t(\cos\theta_o, \eta)}{\pi\,T_{dr}(\eta)},
+
+    the Fresnel-transmitted share of a radiance that is isotropic over the inside hemisphere,
+    normalised so that :math:`\int L\cos\theta_o\,d\omega_o = M` exactly
+    (:func:`diffuse_fresnel_transmittance`). The renderer spreads exitance with it, and
+    :func:`jsss.dipole.radiance` is the dipole's exitance times it. Transport is not this
+    simple: near the source (and at low albedo) light leaves at grazing angles, so a camera
+    looking down sees less (:func:`jsss.transport.radiance`).
+
+    Parameters
+    ----------
+    cos_exit : array_like
+        Cosine of the exit direction *outside*, in [0, 1] (clipped).
+    eta : array_like
+        Relative index (medium / outside), > 0; broadcasts with ``cos_exit``.
+    """
+    cos = jnp.clip(as_float_array(cos_exit), 0.0, 1.0)
+    return fresnel_transmittance(cos, eta) / (jnp.pi * diffuse_fresnel_transmittance(eta))
 
 
 def internal_reflection_parameter(eta):

@@ -58,7 +58,7 @@ def _merge_frames(paths, saturation, dark):
 
 
 def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference_reflectance=0.99, model="dipole",
-                  g=0.0, grid=None, saturation=None):
+                  g=0.0, view_angle_deg=0.0, grid=None, saturation=None):
     from .checks import MeasurementError
     from .exr import read_exr
     from .pipeline import fit_measurement
@@ -91,6 +91,9 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
         raise UsageError(f"--pixel-mm must be > 0 (the pixel size on the sample in mm); got {pixel_mm:g}")
     if not (0 < reference_reflectance <= 1):  # also refuses nan
         raise UsageError(f"--reference-reflectance must be in (0, 1] (0.99 for Spectralon); got {reference_reflectance:g}")
+    if view_angle_deg is not None and not (0 <= view_angle_deg < 90):  # also refuses nan
+        raise UsageError(f"--view-angle must lie in [0, 90) degrees (the camera's angle from the normal); "
+                         f"got {view_angle_deg:g}")
     if model == "transport":
         from jsss import transport
 
@@ -102,6 +105,7 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
         return fit_measurement(meas.pixels, ref.pixels, float(pixel_mm), float(eta),
                                dark=None if dark_img is None else dark_img.pixels,
                                reference_reflectance=reference_reflectance, model=model, g=g,
+                               view_angle_deg=view_angle_deg,
                                channels=meas.channels, grid=grid)
     except MeasurementError as error:
         raise UsageError(f"{meas.path} with reference {ref.path}: {error}") from None
@@ -168,6 +172,7 @@ def _single(args) -> int:
     _say(args, f"fitting {args.model} to {len(args.measurement)} frame(s) (the first fit compiles: 10-20 s)")
     result = _load_and_fit(args.measurement, args.reference, pixel_mm=args.pixel_mm, eta=args.eta, dark=args.dark,
                            reference_reflectance=args.reference_reflectance, model=args.model, g=args.g,
+                           view_angle_deg=_view_angle(args),
                            saturation=args.saturation)
     _report(result, args)
     return 0
@@ -222,7 +227,7 @@ def _demo(args) -> int:
                   f"shot and read noise) {where}")
         _say(args, f"fitting {args.model} (the first fit compiles: 10-20 s)")
         result = _load_and_fit(paths["measurement"], paths["reference"], pixel_mm=None, eta=1.5,
-                               dark=paths.get("dark"), model=args.model, g=args.g)
+                               dark=paths.get("dark"), model=args.model, g=args.g, view_angle_deg=_view_angle(args))
     _report(result, args, truth=synthetic.truth)
     return 0
 
@@ -284,7 +289,7 @@ def _rows(jobs, args):
             result = _load_and_fit(measurement, reference, pixel_mm=overrides.get("pixel_mm", args.pixel_mm),
                                    eta=overrides.get("eta", args.eta), dark=dark,
                                    reference_reflectance=overrides.get("reference_reflectance", args.reference_reflectance),
-                                   model=args.model, g=args.g, grid=grid)
+                                   model=args.model, g=args.g, view_angle_deg=_view_angle(args), grid=grid)
             table = result.table()
             for key in ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance",
                         "mean_free_path_mm", "rel_residual", "chi2_reduced", "converged", "quality"):
@@ -341,6 +346,7 @@ def _batch(argv) -> int:
                         help="profile model: dipole (diffusion) or transport (scaled Monte Carlo tables)")
     parser.add_argument("--g", type=float, default=0.0,
                         help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9)")
+    _camera_arguments(parser)
     parser.add_argument("--version", action="version", version=_version())
     args = parser.parse_args(argv)
     if not args.target and not args.manifest:
@@ -357,6 +363,18 @@ def _batch(argv) -> int:
 
 
 # ----------------------------------------------------------------------------- entry point
+def _camera_arguments(parser):
+    parser.add_argument("--view-angle", type=float, default=0.0, metavar="DEG",
+                        help="the camera's angle from the sample's normal in degrees (default 0: straight down); "
+                             "pixels record radiance toward it")
+    parser.add_argument("--exitance", action="store_true",
+                        help="read pixels as exitance (a simulation's tally of light leaving), not a camera's radiance")
+
+
+def _view_angle(args):
+    return None if args.exitance else args.view_angle
+
+
 def _version() -> str:
     from jsss import __version__
 
@@ -381,6 +399,7 @@ def _parser():
                              "to radiative transfer)")
     parser.add_argument("--g", type=float, default=0.0,
                         help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9)")
+    _camera_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--plot", help="write a PNG of the profile and the fit")
     parser.add_argument("--demo", action="store_true", help="fit a synthetic marble measurement")

@@ -31,6 +31,7 @@ class MeasurementFit:
     channels: tuple[str, ...]
     model: str = "dipole"
     g: float = 0.0
+    view_angle_deg: float | None = 0.0
 
     @property
     def quality(self) -> list[str]:
@@ -57,6 +58,8 @@ class MeasurementFit:
             "quality": self.quality,
             "model": self.model,
             "g": self.g,
+            "observable": "exitance" if self.view_angle_deg is None else "radiance",
+            "view_angle_deg": self.view_angle_deg,
         }
 
 
@@ -74,8 +77,9 @@ def _sum_variance(image, center, pixel_mm):
 
 
 def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, reference_reflectance: float = 0.99,
-                    model: str = "dipole", g: float = 0.0, channels=("R", "G", "B"), n_bins: int = 48,
-                    r_min_mm: float | None = None, grid=None) -> MeasurementFit:
+                    model: str = "dipole", g: float = 0.0, view_angle_deg: float | None = 0.0,
+                    channels=("R", "G", "B"), n_bins: int = 48, r_min_mm: float | None = None,
+                    grid=None) -> MeasurementFit:
     """Calibrate, bin and fit one measurement (images ``(H, W, C)``).
 
     The beam centre and width come from the reference. The fit models the beam, and bins
@@ -84,6 +88,12 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     Hankel grid of the model (build one with :func:`jsss.hankel.hankel_grid` and pass it
     when fitting many measurements). ``model`` and ``g`` choose the profile model (see
     :func:`fitting.medium.fit_medium`).
+
+    The image contract (README): a pixel is proportional to the radiance toward the camera,
+    which looks at the sample ``view_angle_deg`` from its normal (default 0, straight down;
+    the image mapped to the sample plane so that ``pixel_mm`` holds); the beam arrives along
+    the normal and loses its Fresnel reflection at entry; the reference is a Lambertian white.
+    ``view_angle_deg=None`` reads the pixels as exitance instead (a simulation's tally).
 
     Raises
     ------
@@ -129,5 +139,6 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     fit = fit_medium(mean, err, eta, pixel_radii=radii, bin_index=index,
                      total_reflectance=calibrated.total_reflectance, total_stderr=total_stderr,
                      field_radii=field, pixel_area=pixel_mm**2, scale_stderr=scale_stderr, beam_sigma=sigma,
-                     model=model, g=g, grid=grid)
-    return MeasurementFit(fit, profile, calibrated, center, sigma, tuple(channels), model, float(g))
+                     model=model, g=g, view_cos=None if view_angle_deg is None else np.cos(np.radians(view_angle_deg)),
+                     grid=grid)
+    return MeasurementFit(fit, profile, calibrated, center, sigma, tuple(channels), model, float(g), view_angle_deg)

@@ -3,8 +3,10 @@ r"""Synthetic beam-profile measurements with a known answer.
 The sample's exitance is the dipole profile convolved with a Gaussian beam of standard
 deviation ``beam_sigma_mm`` (computed exactly in frequency space: the dipole's closed-form
 spectrum times :math:`e^{-k^2\sigma^2/2}`, one inverse Hankel transform), sampled at pixel
-centres. The reference is the beam on a white diffuser of reflectance
-``reference_reflectance``. The camera is linear: an image value :math:`v` exposed for ``t``
+centres; the camera looking down records radiance, the exitance times
+:math:`\pi (1 - F(0))` times the diffusion exit law (``view_angle_deg``). The reference is
+the beam on a white Lambertian diffuser of reflectance ``reference_reflectance``.
+Images whose truth is radiative transfer come from :mod:`measure.synth_transport` (a walk). The camera is linear: an image value :math:`v` exposed for ``t``
 collects :math:`v\,t\,n_{ph}` photo-electrons (Poisson), plus Gaussian read noise and a dark
 offset, clipped at ``saturation``. ``exposures`` gives brackets; without them one
 (already HDR) frame of ``t = 1`` is returned.
@@ -18,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from jsss import dipole, hankel
+from jsss import dipole, hankel, transport
+from jsss.fresnel import exit_lobe
 from jsss.medium import Medium
 
 from .exr import write_exr
@@ -55,7 +58,7 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
                power: float = 1.0, gain: float = 1.0, photons_per_unit: float = 1e7, read_noise: float = 2.0,
                dark_level: float = 0.0, exposures=None, saturation: float | None = None,
                reference_reflectance: float = 0.99, center_offset=(0.3, -0.2), noise: bool = True,
-               seed: int = 0, grid=None) -> SyntheticMeasurement:
+               view_angle_deg: float | None = 0.0, seed: int = 0, grid=None) -> SyntheticMeasurement:
     """Simulate a measurement of ``medium`` (RGB or one channel) and its white reference.
 
     Parameters
@@ -85,6 +88,11 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
         Sub-pixel offset (rows, cols) of the beam from the image centre.
     noise : bool, keyword-only
         False gives the exact expected images.
+    view_angle_deg : float or None, keyword-only
+        The camera's angle from the normal (default 0): pixels record the radiance toward it
+        under the diffusion exit law, per unit incident flux (the beam loses F(0) at entry),
+        the image contract of :func:`measure.pipeline.fit_measurement`. None gives exitance
+        images (the contract before 2026-11-25).
     seed : int, keyword-only
     grid : HankelGrid, optional, keyword-only
         Transform grid for the beam convolution (default :func:`jsss.hankel.hankel_grid`).
@@ -95,6 +103,9 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
     radii = np.hypot(rows - centre[0], cols - centre[1]) * pixel_mm
     scale = gain * power
     sample = scale * _exitance(medium, radii, beam_sigma_mm, grid)
+    if view_angle_deg is not None:  # pi * (1 - F(0)) * radiance: what the white reference calibrates to
+        cos_view = np.cos(np.radians(view_angle_deg))
+        sample = sample * np.asarray(np.pi * transport.entry_transmittance(medium.eta) * exit_lobe(cos_view, medium.eta))
     channels = sample.shape[-1]
     reference = scale * reference_reflectance * _beam(radii, beam_sigma_mm, channels)
 
@@ -118,7 +129,7 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
                  pixel_mm=pixel_mm, size=size, beam_sigma_mm=beam_sigma_mm, center=list(centre),
                  reference_reflectance=reference_reflectance, photons_per_unit=photons_per_unit, read_noise=read_noise,
                  dark_level=dark_level, exposures=None if exposures is None else list(exposures), saturation=saturation,
-                 seed=seed, noise=noise)
+                 seed=seed, noise=noise, view_angle_deg=view_angle_deg, model="dipole")
     dark = dark_frame() if (dark_level or noise) else None
     measurement, ref_image = expose(sample, 1.0, clip=False), expose(reference, 1.0, clip=False)
     if exposures is None:

@@ -28,7 +28,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..fresnel import diffuse_fresnel_transmittance, fresnel_reflectance, fresnel_transmittance
+from ..fresnel import exit_lobe, fresnel_reflectance
 from ..single_scattering import single_scattering_albedo, single_scattering_brdf_from_cosines
 
 __all__ = ["diffuse_radiance", "single_scattering", "specular_radiance", "surface_radiance", "tone_map"]
@@ -40,9 +40,7 @@ def diffuse_radiance(exitance, cos_view, eta):
     ``cos_view`` is the cosine outside the surface; ``eta`` (C,) the relative index. Over
     the hemisphere :math:`\int L \cos\theta\,d\omega` is ``exitance`` exactly.
     """
-    cos = jnp.clip(cos_view, 0.0, 1.0)[..., None]
-    norm = jnp.pi * diffuse_fresnel_transmittance(eta)
-    return exitance * fresnel_transmittance(cos, eta) / norm
+    return exitance * exit_lobe(jnp.asarray(cos_view)[..., None], eta)
 
 
 def single_scattering(medium, normals, view_dirs, light_geometry, radiant):
