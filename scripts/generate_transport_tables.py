@@ -10,8 +10,10 @@ Run from the repository root (float64; about 20 minutes on 2 cores for 500 000 p
 Several seeds are independent runs whose tables are averaged (each rounded to the shipped
 float32 first, so averaging files of single seeds gives the same bits). Several processes may
 each write a part (``--out part.npz --etas 1.0,1.1 --seeds 1``); ``--merge`` joins parts of
-other etas, and ``--average`` parts of the same etas from other seeds. The shipped tables:
-``--photons 500000 --seeds 0,1`` (two independent runs of 500 000 photons).
+other etas, and ``--average`` parts of the same etas from other seeds (weighted by their
+photons). The shipped tables: ``--photons 500000 --seeds 0,1`` (two independent runs of
+500 000 photons), then ``--average`` of that file with ``--seeds 2`` and ``--seeds 3``:
+2 x 10^6 photons per (eta, g).
 """
 
 from __future__ import annotations
@@ -65,15 +67,20 @@ def build(etas, gs, *, photons, seed, max_path=MAX_PATH, lanes=4096, progress=Tr
 
 
 def average(tables):
-    """Tables of the same grids from independent seeds, as one table of all their photons."""
+    """Tables of the same grids from independent runs, as one table of all their photons.
+
+    Each run weighs by its photons (an average of two seeds counts twice beside a single
+    seed of the same photons each); for equal runs this is the plain mean."""
     if len(tables) == 1:
         return tables[0]
     out = dict(tables[0])
-    k = len(tables)
-    out["exitance"] = (sum(t["exitance"].astype(np.float64) for t in tables) / k).astype(np.float32)
+    photons = [int(t["photons"]) for t in tables]
+    weights = [p / min(photons) for p in photons]
+    k = sum(weights)
+    out["exitance"] = (sum(w * t["exitance"].astype(np.float64) for w, t in zip(weights, tables)) / k).astype(np.float32)
     for key in ("total", "lost", "tail_mass"):
-        out[key] = sum(t[key] for t in tables) / k
-    out["error_total"] = np.sqrt(sum(t["error_total"] ** 2 for t in tables)) / k
+        out[key] = sum(w * t[key] for w, t in zip(weights, tables)) / k
+    out["error_total"] = np.sqrt(sum((w * t["error_total"]) ** 2 for w, t in zip(weights, tables))) / k
     out["photons"] = np.int64(sum(int(t["photons"]) for t in tables))
     out["seed"] = np.array([int(s) for t in tables for s in np.atleast_1d(t["seed"])], np.int64)
     return out
