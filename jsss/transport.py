@@ -235,6 +235,14 @@ def radiance(medium: Medium, r, cos_exit, *, g: float = 0.0):
     cos_exit = append_axes(cos_exit, len(medium.shape))
     rho = r * sigma_s_prime
     nodes = data["mu_nodes"]
+    if is_concrete(cos_exit) and np.ptp(np.asarray(cos_exit)) == 0:
+        # One exit angle for every radius (a camera, a fit): only its two neighbouring bins
+        # are evaluated, a quarter of the radial interpolation's cost.
+        position = float(np.interp(float(np.asarray(cos_exit).reshape(-1)[0]), nodes, np.arange(nodes.size)))
+        lower = min(int(np.floor(position)), nodes.size - 2)
+        t = position - lower
+        below, above = (jnp.exp(_radial(log_rows[..., m, :], rho, data["rho_edges"])) for m in (lower, lower + 1))
+        return sigma_s_prime**2 * jnp.maximum((1 - t) * below + t * above - _FLOOR, 0.0)
     per_bin = jnp.stack([jnp.exp(_radial(log_rows[..., m, :], rho, data["rho_edges"])) for m in range(nodes.size)],
                         axis=-1)
     position = jnp.interp(cos_exit, nodes, np.arange(nodes.size, dtype=float))
