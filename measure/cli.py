@@ -100,7 +100,7 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
         try:
             transport.check_supported(eta, g)
         except ValueError as error:
-            raise UsageError(f"--model transport: {error}") from None
+            raise UsageError(f"--model transport: {error} (--model dipole fits any eta, with diffusion's bias)") from None
     try:
         return fit_measurement(meas.pixels, ref.pixels, float(pixel_mm), float(eta),
                                dark=None if dark_img is None else dark_img.pixels,
@@ -218,13 +218,14 @@ def _demo(args) -> int:
         # Without --keep the files live only as long as the fit; say so rather than name a folder that vanishes.
         directory = Path(args.keep) if args.keep else Path(stack.enter_context(
             tempfile.TemporaryDirectory(prefix="jsss-demo-")))
-        synthetic = synthesize(marble, pixel_mm=0.05, size=256, beam_sigma_mm=0.05, photons_per_unit=1e5, seed=1)
+        synthetic = synthesize(marble, pixel_mm=0.05, size=256, beam_sigma_mm=0.05, photons_per_unit=1e5, seed=1,
+                               model="transport")
         paths = write_measurement(directory, synthetic, name="marble")
         if not args.json:
             where = (f"written to {directory} (marble.exr, marble_ref.exr, marble_dark.exr, marble.json)" if args.keep
                      else "(temporary files; --keep DIR keeps them)")
-            print(f"demo: synthetic marble measurement (256 x 256 px, 0.05 mm pixels, Gaussian beam 0.05 mm, "
-                  f"shot and read noise) {where}")
+            print(f"demo: synthetic camera image of marble (transport tables, 256 x 256 px, 0.05 mm pixels, "
+                  f"Gaussian beam 0.05 mm, shot and read noise) {where}")
         _say(args, f"fitting {args.model} (the first fit compiles: 10-20 s)")
         result = _load_and_fit(paths["measurement"], paths["reference"], pixel_mm=None, eta=1.5,
                                dark=paths.get("dark"), model=args.model, g=args.g, view_angle_deg=_view_angle(args))
@@ -342,10 +343,11 @@ def _batch(argv) -> int:
     parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
     parser.add_argument("--reference-reflectance", type=float, default=0.99,
                         help="total reflectance of the reference (default 0.99, Spectralon)")
-    parser.add_argument("--model", default="dipole", choices=["dipole", "transport"],
-                        help="profile model: dipole (diffusion) or transport (scaled Monte Carlo tables)")
+    parser.add_argument("--model", default="transport", choices=["dipole", "transport"],
+                        help="profile model: transport (default; scaled Monte Carlo tables, exact to radiative "
+                             "transfer, eta 1.0-1.6) or dipole (diffusion: tens of percent off near the source)")
     parser.add_argument("--g", type=float, default=0.0,
-                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9)")
+                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9; default 0)")
     _camera_arguments(parser)
     parser.add_argument("--version", action="version", version=_version())
     args = parser.parse_args(argv)
@@ -394,11 +396,11 @@ def _parser():
     parser.add_argument("--reference-reflectance", type=float, default=0.99,
                         help="total reflectance of the reference (default 0.99, Spectralon)")
     parser.add_argument("--saturation", type=float, help="clip level of a bracket (needed with several frames)")
-    parser.add_argument("--model", default="dipole", choices=["dipole", "transport"],
-                        help="profile model: dipole (diffusion) or transport (scaled Monte Carlo tables, exact "
-                             "to radiative transfer)")
+    parser.add_argument("--model", default="transport", choices=["dipole", "transport"],
+                        help="profile model: transport (default; scaled Monte Carlo tables, exact to radiative "
+                             "transfer, eta 1.0-1.6) or dipole (diffusion: tens of percent off near the source)")
     parser.add_argument("--g", type=float, default=0.0,
-                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9)")
+                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9; default 0)")
     _camera_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--plot", help="write a PNG of the profile and the fit")

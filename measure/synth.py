@@ -1,8 +1,9 @@
 r"""Synthetic beam-profile measurements with a known answer.
 
-The sample's exitance is the dipole profile convolved with a Gaussian beam of standard
-deviation ``beam_sigma_mm`` (computed exactly in frequency space: the dipole's closed-form
-spectrum times :math:`e^{-k^2\sigma^2/2}`, one inverse Hankel transform), sampled at pixel
+The sample's exitance is the dipole (or transport) profile convolved with a Gaussian beam of
+standard deviation ``beam_sigma_mm`` (computed in frequency space: the dipole's closed-form
+spectrum or the tables' forward Hankel transform, times :math:`e^{-k^2\sigma^2/2}`, one
+inverse Hankel transform), sampled at pixel
 centres; the camera looking down records radiance, the exitance times
 :math:`\pi (1 - F(0))` times the diffusion exit law (``view_angle_deg``). The reference is
 the beam on a white Lambertian diffuser of reflectance ``reference_reflectance``.
@@ -41,10 +42,26 @@ class SyntheticMeasurement:
     truth: dict = field(default_factory=dict)
 
 
-def _exitance(medium: Medium, radii_mm: np.ndarray, beam_sigma_mm: float, grid=None) -> np.ndarray:
-    """Dipole convolved with the Gaussian beam at the given radii, shape radii.shape + C."""
+def _observed(medium: Medium, radii_mm: np.ndarray, beam_sigma_mm: float, grid=None, *, model="dipole", g=0.0,
+              view_angle_deg=0.0) -> np.ndarray:
+    """What the calibrated image holds (exitance, or pi (1 - F(0)) L toward the camera), the
+    model convolved with the Gaussian beam, at the given radii: shape radii.shape + C."""
     grid = hankel.hankel_grid() if grid is None else grid
-    spectrum = dipole.spectrum(medium, grid.k) * np.exp(-np.asarray(grid.k)[:, None] ** 2 * beam_sigma_mm**2 / 2)
+    if model == "transport":
+        r = np.asarray(grid.r)
+        if view_angle_deg is None:
+            values = transport.profile(medium, r, g=g)
+        else:
+            cos_view = np.cos(np.radians(view_angle_deg))
+            values = np.pi * transport.entry_transmittance(medium.eta) * transport.radiance(medium, r, cos_view, g=g)
+        spectrum = np.asarray(grid.forward_matrix) @ np.asarray(values).reshape(r.size, -1)
+    else:
+        spectrum = np.asarray(dipole.spectrum(medium, grid.k)).reshape(np.size(grid.k), -1)
+        if view_angle_deg is not None:  # the diffusion exit law
+            cos_view = np.cos(np.radians(view_angle_deg))
+            spectrum = spectrum * np.asarray(np.pi * transport.entry_transmittance(medium.eta)
+                                             * exit_lobe(cos_view, medium.eta)).reshape(-1)
+    spectrum = spectrum * np.exp(-np.asarray(grid.k)[:, None] ** 2 * beam_sigma_mm**2 / 2)
     on_grid = hankel.inverse(grid, spectrum)
     return np.asarray(hankel.at_radii(grid, on_grid, radii_mm)).reshape(radii_mm.shape + (-1,))
 
@@ -58,7 +75,8 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
                power: float = 1.0, gain: float = 1.0, photons_per_unit: float = 1e7, read_noise: float = 2.0,
                dark_level: float = 0.0, exposures=None, saturation: float | None = None,
                reference_reflectance: float = 0.99, center_offset=(0.3, -0.2), noise: bool = True,
-               view_angle_deg: float | None = 0.0, seed: int = 0, grid=None) -> SyntheticMeasurement:
+               view_angle_deg: float | None = 0.0, model: str = "dipole", g: float = 0.0, seed: int = 0,
+               grid=None) -> SyntheticMeasurement:
     """Simulate a measurement of ``medium`` (RGB or one channel) and its white reference.
 
     Parameters
@@ -93,6 +111,12 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
         under the diffusion exit law, per unit incident flux (the beam loses F(0) at entry),
         the image contract of :func:`measure.pipeline.fit_measurement`. None gives exitance
         images (the contract before 2026-11-25).
+    model : {"dipole", "transport"}, keyword-only
+        The profile the images are made with: the dipole (diffusion exit law for radiance),
+        or the transport tables (their radiance; Henyey-Greenstein ``g``). Either way the
+        images agree with the model of the same name in the fit by construction: for a
+        truth outside the models use :mod:`measure.synth_transport`.
+    g : float, keyword-only
     seed : int, keyword-only
     grid : HankelGrid, optional, keyword-only
         Transform grid for the beam convolution (default :func:`jsss.hankel.hankel_grid`).
@@ -102,10 +126,7 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
     rows, cols = np.indices((size, size))
     radii = np.hypot(rows - centre[0], cols - centre[1]) * pixel_mm
     scale = gain * power
-    sample = scale * _exitance(medium, radii, beam_sigma_mm, grid)
-    if view_angle_deg is not None:  # pi * (1 - F(0)) * radiance: what the white reference calibrates to
-        cos_view = np.cos(np.radians(view_angle_deg))
-        sample = sample * np.asarray(np.pi * transport.entry_transmittance(medium.eta) * exit_lobe(cos_view, medium.eta))
+    sample = scale * _observed(medium, radii, beam_sigma_mm, grid, model=model, g=g, view_angle_deg=view_angle_deg)
     channels = sample.shape[-1]
     reference = scale * reference_reflectance * _beam(radii, beam_sigma_mm, channels)
 
@@ -125,11 +146,13 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
         return dark_level + rng.normal(0.0, read_noise, sample.shape) / photons_per_unit
 
     truth = dict(sigma_a=np.asarray(medium.sigma_a).tolist(), sigma_s_prime=np.asarray(medium.sigma_s_prime).tolist(),
-                 eta=np.asarray(medium.eta).tolist(), total_reflectance=np.asarray(dipole.total_reflectance(medium)).tolist(),
+                 eta=np.asarray(medium.eta).tolist(), total_reflectance=np.asarray(
+                     transport.total_reflectance(medium, g=g) if model == "transport"
+                     else dipole.total_reflectance(medium)).tolist(),
                  pixel_mm=pixel_mm, size=size, beam_sigma_mm=beam_sigma_mm, center=list(centre),
                  reference_reflectance=reference_reflectance, photons_per_unit=photons_per_unit, read_noise=read_noise,
                  dark_level=dark_level, exposures=None if exposures is None else list(exposures), saturation=saturation,
-                 seed=seed, noise=noise, view_angle_deg=view_angle_deg, model="dipole")
+                 seed=seed, noise=noise, view_angle_deg=view_angle_deg, model=model, g=g)
     dark = dark_frame() if (dark_level or noise) else None
     measurement, ref_image = expose(sample, 1.0, clip=False), expose(reference, 1.0, clip=False)
     if exposures is None:

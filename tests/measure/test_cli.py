@@ -21,11 +21,13 @@ def run(*args, cwd=None):
 
 @pytest.fixture(scope="module")
 def measurements(tmp_path_factory):
-    """Two noisy synthetic measurements written with the naming rule, plus a broken one."""
+    """Two noisy synthetic camera images (transport tables, the default model) written with the
+    naming rule, plus a broken one."""
     directory = tmp_path_factory.mktemp("batch")
     grid = hankel.hankel_grid()
     for i, name in enumerate(["skin1", "apple"]):
-        write_measurement(directory, synthesize(jensen2001(name), size=128, photons_per_unit=1e5, seed=i, grid=grid),
+        write_measurement(directory, synthesize(jensen2001(name), size=128, photons_per_unit=1e5, seed=i, grid=grid,
+                                                  model="transport"),
                           name=name)
     write_exr(directory / "orphan.exr", np.ones((8, 8, 3)))  # no orphan_ref.exr beside it
     return directory
@@ -199,6 +201,7 @@ def test_exposure_brackets_are_merged_before_the_fit(tmp_path):
     """Three clipped brackets (exposure in each header) + --saturation fit like an HDR image."""
     medium = jensen2001("marble")
     synthetic = synthesize(medium, size=128, photons_per_unit=1e5, exposures=[1.0, 0.05, 0.0025], saturation=0.2,
+                           model="transport",
                            seed=5)
     paths = write_measurement(tmp_path, synthetic, name="m")
     frames = [paths[f"frame_{i}"] for i in range(3)]
