@@ -170,12 +170,39 @@ def _single(args) -> int:
     if not args.reference:
         raise UsageError("--reference REF.exr is required (or use --demo)")
     _say(args, f"fitting {args.model} to {len(args.measurement)} frame(s) (the first fit compiles: 10-20 s)")
-    result = _load_and_fit(args.measurement, args.reference, pixel_mm=args.pixel_mm, eta=args.eta, dark=args.dark,
-                           reference_reflectance=args.reference_reflectance, model=args.model, g=args.g,
-                           view_angle_deg=_view_angle(args),
-                           saturation=args.saturation)
-    _report(result, args)
+    fit_args = dict(pixel_mm=args.pixel_mm, eta=args.eta, dark=args.dark,
+                    reference_reflectance=args.reference_reflectance, g=args.g, view_angle_deg=_view_angle(args),
+                    saturation=args.saturation)
+    result = _load_and_fit(args.measurement, args.reference, model=args.model, **fit_args)
+    comparison = None
+    if args.model == "dipole":
+        comparison = _dipole_bias(result, lambda: _load_and_fit(args.measurement, args.reference, model="transport",
+                                                                **fit_args))
+    _report(result, args, extra=comparison)
     return 0
+
+
+def _dipole_bias(result, fit_transport):
+    """Warn where the dipole's known bias exceeds its stated error: refit with the transport
+    model (exact to radiative transfer) and compare, channel by channel. Returns the JSON
+    entry (relative differences), or None where the tables do not cover eta or g."""
+    from jsss import transport
+
+    try:
+        transport.check_supported(np.asarray(result.fit.medium.eta), result.g)
+    except ValueError:
+        return None
+    dipole_table, exact = result.table(), fit_transport().table()
+    out = {"sigma_a": [], "sigma_s_prime": []}
+    for i, channel in enumerate(dipole_table["channels"]):
+        for key in out:
+            value, error, reference = dipole_table[key][i], dipole_table[f"{key}_err"][i], exact[key][i]
+            out[key].append(value / reference - 1)
+            if abs(value - reference) > error:  # the same image: the difference is the models', not noise
+                print(f"{PROG}: warning: channel {channel}: the dipole's {key} {value:.4g} is {value / reference - 1:+.1%} "
+                      f"from the transport model's {reference:.4g} on the same image, {abs(value - reference) / error:.0f} "
+                      "times its stated error: diffusion's bias, not noise (use --model transport)", file=sys.stderr)
+    return {"dipole_minus_transport": out}
 
 
 def _warn_quality(table, stream=sys.stderr):
@@ -185,8 +212,8 @@ def _warn_quality(table, stream=sys.stderr):
             print(f"{PROG}: warning: channel {channel}: {quality}", file=stream)
 
 
-def _report(result, args, truth=None):
-    table = result.table()
+def _report(result, args, truth=None, extra=None):
+    table = {**result.table(), **(extra or {})}
     _warn_quality(table)
     if args.plot:
         _plot(result, args.plot)
