@@ -63,7 +63,9 @@ class MediumFit(eqx.Module):
     n_iterations : Array
     converged : Array of bool
         The solver met its tolerances *and* the estimate is determined: finite, with each
-        standard error smaller than its parameter (a run-away parameter is not converged).
+        standard error smaller than its parameter, and each parameter felt by the data (a
+        factor e in it moves the whitened residuals by more than one): a parameter that ran
+        away, to infinity or to 0, is not converged.
     """
 
     medium: Medium
@@ -178,10 +180,14 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, k, grid
         sa, ss = jnp.exp(params[0]), jnp.exp(params[1])
         sa_err, ss_err = sa * jnp.sqrt(cov[0, 0]), ss * jnp.sqrt(cov[1, 1])
         # The solver stopping is not enough: a parameter that runs off (sigma_s' = 1e29 on a
-        # swapped image) "converges" with an error larger than itself. Converged means a
-        # determined estimate: finite, and each standard error below its value.
+        # swapped image) "converges" with an error larger than itself, and one that runs to 0
+        # (sigma_a when nothing in the data depends on it) leaves J^T J singular, where the
+        # pseudo-inverse reports a small error. Converged means a determined estimate: finite,
+        # each standard error below its value, and each parameter felt by the data (changing
+        # it by a factor e moves the whitened residuals by more than one).
         values = jnp.stack([sa, ss, sa_err, ss_err])
-        determined = jnp.all(jnp.isfinite(values)) & (sa_err < sa) & (ss_err < ss)
+        felt = jnp.sqrt(jnp.sum(jac**2, axis=0)) > 1.0
+        determined = jnp.all(jnp.isfinite(values)) & (sa_err < sa) & (ss_err < ss) & jnp.all(felt)
         return (sa, ss, sa_err, ss_err, model_total, rel_rms, chi2_red, steps[best], ok[best] & determined)
 
     return jax.vmap(one, in_axes=(1, 1, 0, 0, 0, 0, 0))(measured, stderr, totals, total_errs, scale_errs, eta, starts)

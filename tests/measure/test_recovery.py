@@ -127,3 +127,22 @@ def test_a_run_away_fit_is_not_converged(monkeypatch):
     table = result.table()
     assert not any(table["converged"])
     assert all(q.startswith("poor") for q in table["quality"])
+
+
+def test_a_parameter_that_ran_to_zero_is_not_converged(monkeypatch):
+    """Started from only two mean free paths (0.01 and 10 mm), the marble fit lands where
+    sigma_a is 1e-9 of its truth: J^T J is singular there and the pseudo-inverse reports a
+    small error, but the data no longer feel sigma_a, so `converged` is false (before: true)."""
+    import functools
+
+    import fitting.medium
+    import measure.pipeline as pipeline
+
+    medium = jensen2001("marble")
+    synthetic = synthesize(medium, size=256, photons_per_unit=1e5, seed=1, model="transport")
+    monkeypatch.setattr(pipeline, "fit_medium", functools.partial(fitting.medium.fit_medium, n_starts=2))
+    table = pipeline.fit_measurement(synthetic.measurement, synthetic.reference, 0.05, 1.5, dark=synthetic.dark,
+                                     model="transport").table()
+    ran_away = np.asarray(table["sigma_a"]) < 1e-3 * np.asarray(medium.sigma_a)
+    assert ran_away.any()  # the situation this test is about
+    assert not any(np.asarray(table["converged"])[ran_away])
