@@ -54,7 +54,7 @@ def main():
     info = transport.table_info()
     cases = [(a, eta, g) for g in (0.0, 0.9) for eta in (1.0, 1.3, 1.55) for a in ALBEDOS]
     if args.quick:
-        cases = [(0.9, 1.3, 0.0), (0.5, 1.0, 0.9)]
+        cases = [(0.99, 1.0, 0.0), (0.99, 1.55, 0.9), (0.9, 1.55, 0.0)]
     edges = annulus_edges(RADII)
     print(f"profiles vs independent Monte Carlo ({args.photons} photons per case; tables: "
           f"{int(info['photons'])} photons per (eta, g)), {jax.devices()[0].platform}, "

@@ -60,6 +60,35 @@ def _log_filled(values, axis):
     return np.moveaxis(out.reshape(moved.shape), -1, axis)
 
 
+def _centre_values(log_cells, axis, log_step):
+    """Log of the value at each annulus's log-centre from the log of its area average.
+
+    Over an annulus of width ``h`` in ln r the area weight r^2 puts the mean of ln r at
+    h^2/6 above the log-centre (second moment h^2/12), so for ln R = g(ln r),
+    ln(average) = g + g' h^2/6 + (g'' + g'^2) h^2/24 + O(h^4): the average, read as the
+    value at the centre, is low by about 0.6 % per unit of -g' at 12 cells a decade (measured
+    against walks: a -0.7 % lean before this). Derivatives are central differences over
+    recorded neighbours (one-sided at the ends); cells next to unrecorded ones are left as
+    they are, and the correction is capped at 10 %. Index 0 of ``axis`` (the inner disc) is
+    not an annulus and is left alone.
+    """
+    moved = np.moveaxis(np.asarray(log_cells, float), axis, -1)
+    rings = moved[..., 1:]
+    h = np.log(10.0) * log_step
+    recorded = rings > np.log(_FLOOR) + 1.0
+    slope, curvature = np.zeros_like(rings), np.zeros_like(rings)
+    slope[..., 1:-1] = (rings[..., 2:] - rings[..., :-2]) / (2 * h)
+    slope[..., 0], slope[..., -1] = (rings[..., 1] - rings[..., 0]) / h, (rings[..., -1] - rings[..., -2]) / h
+    curvature[..., 1:-1] = (rings[..., 2:] - 2 * rings[..., 1:-1] + rings[..., :-2]) / h**2
+    usable = recorded.copy()
+    usable[..., 1:] &= recorded[..., :-1]
+    usable[..., :-1] &= recorded[..., 1:]
+    shift = np.clip(slope * h**2 / 6 + (curvature + slope**2) * h**2 / 24, -0.1, 0.1)
+    corrected = np.where(usable, rings - shift, rings)
+    out = np.concatenate([moved[..., :1], corrected], axis=-1)
+    return np.moveaxis(out, -1, axis)
+
+
 @functools.lru_cache(maxsize=None)
 def _tables():
     with resources.files("jsss.data").joinpath("transport_tables.npz").open("rb") as handle:
@@ -67,8 +96,9 @@ def _tables():
     exitance = data["exitance"].astype(np.float64)                     # (eta, g, rho, a, mu)
     mu_edges = data["mu_edges"]
     solid = np.pi * np.diff(mu_edges**2)                                 # projected solid angle of each mu bin
-    data["log_exitance"] = _log_filled(exitance.sum(-1), axis=2)         # (eta, g, rho, a)
-    data["log_radiance"] = _log_filled(exitance / solid, axis=2)         # (eta, g, rho, a, mu)
+    log_step = np.log10(data["rho_edges"][2]) - np.log10(data["rho_edges"][1])
+    data["log_exitance"] = _centre_values(_log_filled(exitance.sum(-1), axis=2), 2, log_step)  # (eta, g, rho, a)
+    data["log_radiance"] = _centre_values(_log_filled(exitance / solid, axis=2), 2, log_step)  # (eta, g, rho, a, mu)
     data["log_total"] = np.log(data["total"])                            # (eta, g, a)
     data["mu_nodes"] = np.sqrt(0.5 * (mu_edges[:-1] ** 2 + mu_edges[1:] ** 2))
     return data
