@@ -54,7 +54,7 @@ def test_transport_camera_fit_recovers_a_walks_medium(walk_image, grid):
     """The transport model's radiance, calibrated like a camera image (pi (1 - F(0)) L), recovers
     both coefficients within 3 of their stated standard errors, which must be informative
     (below 10 % for sigma_a, 2 % for sigma_s'; measured on this seed with the 2 x 10^6-photon
-    tables: sigma_a +8.0 % (z 1.0), sigma_s' +1.1 % (z 1.0), chi^2/dof 1.2), and the fit's
+    tables: sigma_a +12.3 % (z 1.5), sigma_s' +0.7 % (z 0.6), chi^2/dof 1.2), and the fit's
     quality is ok."""
     medium, image = walk_image
     table = _fit(image, medium, grid, model="transport", view_angle_deg=0.0)
@@ -66,7 +66,7 @@ def test_transport_camera_fit_recovers_a_walks_medium(walk_image, grid):
 
 def test_reading_a_camera_image_as_exitance_is_biased_and_flagged(walk_image, grid):
     """The same image fitted as exitance, or with the dipole's radiance law: worse by far
-    (measured on this seed, as exitance: sigma_a -33 %, sigma_s' -7 %, chi^2/dof 16; dipole:
+    (measured on this seed, as exitance: sigma_a -30 %, sigma_s' -7 %, chi^2/dof 16; dipole:
     sigma_a +225 %, sigma_s' +28 %, chi^2/dof 224)."""
     medium, image = walk_image
     exact = max(abs(z) for _, z in _errors(_fit(image, medium, grid, model="transport"), medium))
