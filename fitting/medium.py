@@ -40,7 +40,7 @@ from jsss.fresnel import exit_lobe
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
 
-__all__ = ["MODELS", "MediumFit", "fit_medium"]
+__all__ = ["MODELS", "MediumFit", "fit_medium", "observable"]
 
 MODELS = ("dipole", "transport")
 
@@ -91,7 +91,7 @@ def _interpolation_rows(grid_r, radii, rows, n_rows, scale):
     return matrix
 
 
-def _observable(model, g, view_cos, medium, k, grid_r):
+def observable(model, g, view_cos, medium, k, grid_r):
     r"""The model's observable, and its whole-plane total, for one medium.
 
     For the dipole the values are the Hankel spectrum on ``k`` (closed form); for transport
@@ -107,11 +107,11 @@ def _observable(model, g, view_cos, medium, k, grid_r):
         return dipole.spectrum(medium, k), dipole.total_reflectance(medium)
     entering = transport.entry_transmittance(medium.eta)
     if model == "transport":
-        observable = jnp.pi * entering * transport.radiance(medium, grid_r, view_cos, g=g)
+        values = jnp.pi * entering * transport.radiance(medium, grid_r, view_cos, g=g)
         # whole plane: the trapezoid in log r of 2 pi r^2 f (the grid spans many decades)
-        integrand = 2 * jnp.pi * (grid_r**2)[:, None] * observable.reshape(grid_r.shape[0], -1)
+        integrand = 2 * jnp.pi * (grid_r**2)[:, None] * values.reshape(grid_r.shape[0], -1)
         total = jnp.sum(0.5 * (integrand[1:] + integrand[:-1]) * jnp.diff(jnp.log(grid_r))[:, None], axis=0)
-        return observable, total.reshape(observable.shape[1:])
+        return values, total.reshape(values.shape[1:])
     factor = jnp.pi * entering * exit_lobe(view_cos, medium.eta)  # the diffusion exit law
     return dipole.spectrum(medium, k) * factor, dipole.total_reflectance(medium) * factor
 
@@ -127,7 +127,7 @@ def _model(params, args):
     log_sa, log_ss = params
     (model, g, view_cos), eta, k, grid_r, bins_operator, total_operator = args
     medium = Medium(jnp.exp(log_sa), jnp.exp(log_ss), eta)
-    values, plane_total = _observable(model, g, view_cos, medium, k, grid_r)
+    values, plane_total = observable(model, g, view_cos, medium, k, grid_r)
     total = plane_total if total_operator is None else total_operator @ values
     return bins_operator @ values, total
 
@@ -174,7 +174,7 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, k, grid
         d_params_d_scale = -normal_inverse @ (jac.T @ d_res_d_scale)
         cov = cov + jnp.outer(d_params_d_scale, d_params_d_scale) * scale_err**2
         binned, _ = _model(params, args[0])
-        model_total = _observable(*model, Medium(jnp.exp(params[0]), jnp.exp(params[1]), eta_c), k, grid_r)[1]
+        model_total = observable(*model, Medium(jnp.exp(params[0]), jnp.exp(params[1]), eta_c), k, grid_r)[1]
         rel = jnp.where(usable, binned / jnp.where(usable, meas, 1.0) - 1, 0.0)
         rel_rms = jnp.sqrt(jnp.sum(rel**2) / jnp.maximum(jnp.sum(usable), 1))
         sa, ss = jnp.exp(params[0]), jnp.exp(params[1])
@@ -295,9 +295,11 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
     # of the grid's dense transform (about 1 ms of the 1.3 ms per evaluation before).
     beam = np.exp(-np.asarray(grid.k, float) ** 2 * float(beam_sigma) ** 2 / 2)
 
+    forward = np.asarray(grid.forward_matrix, float) if model == "transport" else None
+
     def from_values(from_spectrum):  # (..., K) acting on the spectrum -> acting on the model's values
         with_beam = from_spectrum * beam
-        return with_beam @ np.asarray(grid.forward_matrix, float) if model == "transport" else with_beam
+        return with_beam if forward is None else with_beam @ forward
 
     bins_operator = jnp.asarray(from_values(bins_matrix @ inverse), measured.dtype)
     total_operator = None
@@ -309,7 +311,8 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
     scale_errs = jnp.broadcast_to(jnp.asarray(0.0 if scale_stderr is None else scale_stderr, measured.dtype),
                                   (n_channels,))
     out = _fit_channels(measured, errors, totals, total_errs, scale_errs, eta, jnp.asarray(grid.k, measured.dtype),
-                        jnp.asarray(grid.r, measured.dtype), bins_operator, total_operator, (log_sa, log_ss), max_steps=max_steps, rtol=rtol, atol=atol,
+                        jnp.asarray(grid.r, measured.dtype), bins_operator, total_operator, (log_sa, log_ss),
+                        max_steps=max_steps, rtol=rtol, atol=atol,
                         model=(model, float(g), None if view_cos is None else float(view_cos)))
     sa, ss, sa_err, ss_err, total, rel, chi2, steps, ok = out
     return MediumFit(Medium(sa, ss, eta), sa_err, ss_err, total, rel, chi2, steps, ok)

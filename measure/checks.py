@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .profile import beam_sigma
+from .profile import beam_sigma, half_max_radius_px
 
 __all__ = [
     "BEAM_MIN_FRACTION",
@@ -61,12 +61,6 @@ def _light_within(image, center, radius_px):
     return float(total[inside].sum() / total.sum())
 
 
-def _half_max_radius_px(image):
-    """Radius [px] of a disc with the area of the pixels above half the peak."""
-    total = image.sum(axis=-1)
-    return float(np.sqrt(max(np.count_nonzero(total > 0.5 * total.max()), 1) / np.pi))
-
-
 def check_measurement(measurement, reference, *, center, pixel_mm: float, window_mm: float, beam_sigma_mm: float,
                       signal, signal_stderr, channels) -> None:
     """Raise :class:`MeasurementError` for images that cannot be a measurement (module docstring).
@@ -90,7 +84,7 @@ def check_measurement(measurement, reference, *, center, pixel_mm: float, window
     if measurement.shape == reference.shape and np.array_equal(measurement, reference):
         raise MeasurementError("the measurement and the reference are the same image; the reference is the beam on "
                                "a white diffuser, the measurement the beam on the sample")
-    radius = max(3 * _half_max_radius_px(reference), 3.0)
+    radius = max(3 * half_max_radius_px(reference), 3.0)
     fraction = _light_within(reference, center, radius)
     if fraction < BEAM_MIN_FRACTION:
         raise MeasurementError(

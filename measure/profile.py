@@ -25,6 +25,7 @@ __all__ = [
     "beam_window_mm",
     "calibrate",
     "check_image",
+    "half_max_radius_px",
     "merge_brackets",
     "radial_profile",
 ]
@@ -90,8 +91,7 @@ def beam_center(image, *, iterations: int = 5) -> tuple[float, float]:
     if peak <= 0:
         raise ValueError("beam_center: the image holds no light.")
     rows, cols = np.indices(image.shape)
-    half_radius = np.sqrt(max(np.count_nonzero(image > 0.5 * peak), 1) / np.pi)
-    window = max(5 * half_radius, 3.0)
+    window = max(5 * half_max_radius_px(image), 3.0)
     center = np.unravel_index(np.argmax(image), image.shape)
     weights_all = np.clip(image, 0, None)
     for _ in range(iterations):
@@ -102,11 +102,17 @@ def beam_center(image, *, iterations: int = 5) -> tuple[float, float]:
     return center
 
 
+def half_max_radius_px(image) -> float:
+    """Radius [px] of a disc with the area of the pixels above half the peak of ``image``
+    (2-D, or ``(H, W, C)`` summed over channels): a beam's rough width."""
+    image = np.asarray(image, dtype=float)
+    total = image.sum(axis=-1) if image.ndim == 3 else image
+    return float(np.sqrt(max(np.count_nonzero(total > 0.5 * total.max()), 1) / np.pi))
+
+
 def beam_window_mm(reference, pixel_mm: float) -> float:
     """The window [mm] of :func:`beam_sigma`: 10x the radius at half maximum, at least 5 pixels."""
-    image = check_image(reference, name="reference").sum(axis=-1)
-    rough = np.sqrt(max(np.count_nonzero(image > 0.5 * image.max()), 1) / np.pi) * pixel_mm
-    return max(10 * rough, 5 * pixel_mm)
+    return max(10 * half_max_radius_px(check_image(reference, name="reference")) * pixel_mm, 5 * pixel_mm)
 
 
 def beam_sigma(reference, center, pixel_mm: float, *, radius_mm: float | None = None) -> float:

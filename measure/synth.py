@@ -3,13 +3,13 @@ r"""Synthetic beam-profile measurements with a known answer.
 The sample's exitance is the dipole (or transport) profile convolved with a Gaussian beam of
 standard deviation ``beam_sigma_mm`` (computed in frequency space: the dipole's closed-form
 spectrum or the tables' forward Hankel transform, times :math:`e^{-k^2\sigma^2/2}`, one
-inverse Hankel transform), sampled at pixel
-centres; the camera looking down records radiance, the exitance times
-:math:`\pi (1 - F(0))` times the diffusion exit law (``view_angle_deg``). The reference is
-the beam on a white Lambertian diffuser of reflectance ``reference_reflectance``.
-Images whose truth is radiative transfer come from :mod:`measure.synth_transport` (a walk). The camera is linear: an image value :math:`v` exposed for ``t``
-collects :math:`v\,t\,n_{ph}` photo-electrons (Poisson), plus Gaussian read noise and a dark
-offset, clipped at ``saturation``. ``exposures`` gives brackets; without them one
+inverse Hankel transform), sampled at pixel centres; the camera looking down records
+radiance, the exitance times :math:`\pi (1 - F(0))` times the diffusion exit law
+(``view_angle_deg``). The reference is the beam on a white Lambertian diffuser of
+reflectance ``reference_reflectance``. Images whose truth is radiative transfer come from
+:mod:`measure.synth_transport` (a walk). The camera is linear: an image value :math:`v`
+exposed for ``t`` collects :math:`v\,t\,n_{ph}` photo-electrons (Poisson), plus Gaussian
+read noise and a dark offset, clipped at ``saturation``. ``exposures`` gives brackets; without them one
 (already HDR) frame of ``t = 1`` is returned.
 """
 
@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fitting.medium import observable
 from jsss import dipole, hankel, transport
-from jsss.fresnel import exit_lobe
 from jsss.medium import Medium
 
 from .exr import write_exr
@@ -47,20 +47,13 @@ def _observed(medium: Medium, radii_mm: np.ndarray, beam_sigma_mm: float, grid=N
     """What the calibrated image holds (exitance, or pi (1 - F(0)) L toward the camera), the
     model convolved with the Gaussian beam, at the given radii: shape radii.shape + C."""
     grid = hankel.hankel_grid() if grid is None else grid
+    # The fit's own forward model (fitting.medium.observable), so the two cannot drift apart:
+    # a spectrum for the dipole, a profile on the transform grid for transport.
+    view_cos = None if view_angle_deg is None else float(np.cos(np.radians(view_angle_deg)))
+    values, _ = observable(model, float(g), view_cos, medium, grid.k, grid.r)
+    spectrum = np.asarray(values).reshape(np.size(grid.k), -1)
     if model == "transport":
-        r = np.asarray(grid.r)
-        if view_angle_deg is None:
-            values = transport.profile(medium, r, g=g)
-        else:
-            cos_view = np.cos(np.radians(view_angle_deg))
-            values = np.pi * transport.entry_transmittance(medium.eta) * transport.radiance(medium, r, cos_view, g=g)
-        spectrum = np.asarray(grid.forward_matrix) @ np.asarray(values).reshape(r.size, -1)
-    else:
-        spectrum = np.asarray(dipole.spectrum(medium, grid.k)).reshape(np.size(grid.k), -1)
-        if view_angle_deg is not None:  # the diffusion exit law
-            cos_view = np.cos(np.radians(view_angle_deg))
-            spectrum = spectrum * np.asarray(np.pi * transport.entry_transmittance(medium.eta)
-                                             * exit_lobe(cos_view, medium.eta)).reshape(-1)
+        spectrum = np.asarray(grid.forward_matrix) @ spectrum
     spectrum = spectrum * np.exp(-np.asarray(grid.k)[:, None] ** 2 * beam_sigma_mm**2 / 2)
     on_grid = hankel.inverse(grid, spectrum)
     return np.asarray(hankel.at_radii(grid, on_grid, radii_mm)).reshape(radii_mm.shape + (-1,))
