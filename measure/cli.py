@@ -178,7 +178,7 @@ def _single(args) -> int:
     if args.model == "dipole":
         comparison = _dipole_bias(result, lambda: _load_and_fit(args.measurement, args.reference, model="transport",
                                                                 **fit_args))
-    _report(result, args, extra=comparison)
+    _report(result, args, extra=comparison, stem=Path(args.measurement[0]).stem)
     return 0
 
 
@@ -212,11 +212,51 @@ def _warn_quality(table, stream=sys.stderr):
             print(f"{PROG}: warning: channel {channel}: {quality}", file=stream)
 
 
-def _report(result, args, truth=None, extra=None):
+EXPORTS = {"mitsuba": "_mitsuba.xml", "pbrt": ".pbrt", "blender": "_blender.py"}
+
+
+def _write_exports(result, args, stem) -> list[str]:
+    """The fitted material for other renderers (--export) and as a jsss scene (--scene).
+
+    Returns the lines that say what was written (stdout, or stderr with --json)."""
+    from jsss import export
+
+    said = []
+    medium, g = result.fit.medium, result.g
+    prefix = Path(args.export_to) if args.export_to else Path(stem)
+    for kind in dict.fromkeys(args.export or []):
+        path = prefix.with_name(prefix.name + EXPORTS[kind])
+        if kind == "mitsuba":
+            text = export.mitsuba_xml(medium, g=g, unit_mm=args.unit_mm, name=prefix.name)
+        elif kind == "pbrt":
+            text = export.pbrt_material(medium, g=g, unit_mm=args.unit_mm, name=prefix.name)
+        else:
+            text = export.blender_python(medium, g=g, unit_mm=args.unit_mm, name=prefix.name)
+        _write_text(path, text)
+        said.append(f"{kind} material written to {path}")
+    if args.scene:
+        from jsss.render.scene import medium_scene_toml
+
+        _write_text(args.scene, medium_scene_toml(medium, label=f"fit-params {stem}", profile=result.model, g=g))
+        said.append(f"scene written to {args.scene} (render it: jsss-render {args.scene})")
+    return said
+
+
+def _check_export_arguments(args):
+    if not (np.isfinite(args.unit_mm) and args.unit_mm > 0):
+        raise UsageError(f"--unit-mm must be > 0 (millimetres per scene unit: 1 for mm, 1000 for metres); "
+                         f"got {args.unit_mm:g}")
+    if args.export_to and not args.export:
+        raise UsageError("--export-to PREFIX goes with --export FORMAT")
+
+
+def _report(result, args, truth=None, extra=None, stem="fitted"):
     table = {**result.table(), **(extra or {})}
     _warn_quality(table)
     if args.plot:
         _plot(result, args.plot)
+    for line in _write_exports(result, args, stem):
+        print(line, file=sys.stderr if args.json else sys.stdout)
     if args.json:
         if truth is not None:
             table = {**table, "truth": truth}
@@ -256,7 +296,7 @@ def _demo(args) -> int:
         _say(args, f"fitting {args.model} (the first fit compiles: 10-20 s)")
         result = _load_and_fit(paths["measurement"], paths["reference"], pixel_mm=None, eta=1.5,
                                dark=paths.get("dark"), model=args.model, g=args.g, view_angle_deg=_view_angle(args))
-    _report(result, args, truth=synthetic.truth)
+    _report(result, args, truth=synthetic.truth, stem="marble")
     return 0
 
 
@@ -330,15 +370,35 @@ def _rows(jobs, args):
     return rows
 
 
-def _write_table(rows, out):
-    """Write CSV (or Parquet) to a temp file beside ``out``, then rename: no partial tables."""
+def _write_atomically(out, write):
+    """``write(tmp_path)`` to a temp file beside ``out``, then rename: no partial files."""
     out = Path(out)
-    # Columns in the order the rows hold them (the image's channel order, e.g. R, G, B), not sorted.
-    columns = list(dict.fromkeys(["file", "status", "error"] + [k for r in rows for k in r]))
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
     os.close(fd)
     try:
+        write(tmp)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _write_text(out, text):
+    def write(tmp):
+        with open(tmp, "w") as handle:
+            handle.write(text)
+
+    _write_atomically(out, write)
+
+
+def _write_table(rows, out):
+    """Write CSV (or Parquet) atomically (temp file beside ``out``, then rename): no partial tables."""
+    out = Path(out)
+    # Columns in the order the rows hold them (the image's channel order, e.g. R, G, B), not sorted.
+    columns = list(dict.fromkeys(["file", "status", "error"] + [k for r in rows for k in r]))
+
+    def write(tmp):
         if out.suffix == ".parquet":
             try:
                 import pyarrow as pa
@@ -351,10 +411,8 @@ def _write_table(rows, out):
                 writer = csv.DictWriter(handle, fieldnames=columns)
                 writer.writeheader()
                 writer.writerows(rows)
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+
+    _write_atomically(out, write)
 
 
 def _batch(argv) -> int:
@@ -431,6 +489,18 @@ def _parser():
     _camera_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--plot", help="write a PNG of the profile and the fit")
+    parser.add_argument("--export", action="append", choices=sorted(EXPORTS), metavar="FORMAT",
+                        help="write the fitted material for another renderer: mitsuba (XML scene, homogeneous medium "
+                             "in a dielectric), pbrt (pbrt-v4 subsurface material) or blender (a Python script for a "
+                             "Cycles random-walk Principled BSDF); repeat for several")
+    parser.add_argument("--export-to", metavar="PREFIX",
+                        help="path prefix of the exported files (default: the measurement's name, in the current "
+                             "directory): PREFIX_mitsuba.xml, PREFIX.pbrt, PREFIX_blender.py")
+    parser.add_argument("--unit-mm", type=float, default=1.0,
+                        help="millimetres per scene unit of the exported materials (default 1; 1000 for metres)")
+    parser.add_argument("--scene", metavar="OUT.toml",
+                        help="write a jsss scene with the fitted material (and the fitted profile model) that "
+                             "jsss-render renders as it is")
     parser.add_argument("--demo", action="store_true", help="fit a synthetic marble measurement")
     parser.add_argument("--keep", metavar="DIR",
                         help="with --demo: write the demo's EXRs (and the truth as JSON) to DIR and keep them")
@@ -449,6 +519,7 @@ def main(argv=None) -> int:
         _enable_x64()
         if args.keep and not args.demo:
             raise UsageError("--keep DIR goes with --demo (it keeps the demo's images)")
+        _check_export_arguments(args)
         if args.demo:
             return _demo(args)
         if not args.measurement:

@@ -46,17 +46,35 @@ def test_demo_prints_truth_beside_estimate_as_json():
 
 def test_transport_model_fits_and_says_so(measurements, tmp_path):
     """--model transport runs the fit through the scaled Monte Carlo tables and records the
-    model and g in the JSON (synthetic dipole images: the truth is not transport here, so
-    only sanity is asserted: finite, positive, converged)."""
+    model and g in the JSON (the images were made with g = 0: only sanity is asserted: finite,
+    positive, converged). The same run exports the material for three renderers and as a jsss
+    scene: each file holds the fitted numbers and the scene loads with the fitted model."""
+    import xml.etree.ElementTree as ET
+
+    from jsss.render import load_scene
+
     d = measurements
     plot = tmp_path / "fit.png"
     out = run(d / "skin1.exr", "--reference", d / "skin1_ref.exr", "--dark", d / "skin1_dark.exr", "--eta", 1.3,
-              "--model", "transport", "--g", 0.8, "--json", "--plot", plot)
+              "--model", "transport", "--g", 0.8, "--json", "--plot", plot, "--export", "mitsuba", "--export", "pbrt",
+              "--export", "blender", "--export-to", tmp_path / "skin1", "--unit-mm", 10, "--scene",
+              tmp_path / "skin1.toml")
     assert out.returncode == 0, out.stderr
     table = json.loads(out.stdout)
     assert table["model"] == "transport" and table["g"] == 0.8
     assert all(np.isfinite(table["sigma_a"])) and min(table["sigma_s_prime"]) > 0 and all(table["converged"])
     assert plot.stat().st_size > 1000
+    medium = ET.parse(tmp_path / "skin1_mitsuba.xml").getroot().find("medium")
+    scale = float(medium.find("float[@name='scale']").get("value"))
+    sigma_t = scale * np.array(medium.find("rgb[@name='sigma_t']").get("value").split(","), float)
+    np.testing.assert_allclose(sigma_t * (1 - np.array(medium.find("rgb[@name='albedo']").get("value").split(","),
+                                                        float)), 10 * np.array(table["sigma_a"]), rtol=1e-6)
+    assert 'MakeNamedMaterial "skin1"' in (tmp_path / "skin1.pbrt").read_text()
+    compile((tmp_path / "skin1_blender.py").read_text(), "skin1_blender.py", "exec")
+    scene = load_scene(tmp_path / "skin1.toml")
+    assert scene.material.profile_model == "transport" and scene.material.g == 0.8
+    np.testing.assert_allclose(np.asarray(scene.material.medium.sigma_a), table["sigma_a"], rtol=1e-8)
+    assert f"scene written to {tmp_path / 'skin1.toml'}" in out.stderr
 
 
 def test_single_measurement_table_and_plot(measurements, tmp_path):
@@ -115,6 +133,7 @@ def test_manifest_lists_measurements(measurements, tmp_path):
         ("self", "the measurement and the reference are the same image"),
         ("narrow", "the measurement is narrower than its reference beam"),
         ("bad_reflectance", "--reference-reflectance must be in (0, 1] (0.99 for Spectralon); got nan"),
+        ("unit", "--unit-mm must be > 0 (millimetres per scene unit: 1 for mm, 1000 for metres); got 0"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path):
@@ -155,6 +174,8 @@ def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path
                 write_exr(tmp_path / "wide.exr", beam(3.0)), "--pixel-mm", 0.05]
     elif case == "bad_reflectance":
         args = [d / "skin1.exr", "--reference", ref, "--reference-reflectance", "nan"]
+    elif case == "unit":
+        args = [d / "skin1.exr", "--reference", ref, "--export", "pbrt", "--unit-mm", 0]
     else:
         args = [write_exr(tmp_path / "small.exr", np.ones((8, 8, 3))), "--reference", ref, "--pixel-mm", 0.05]
     out = run(*args)
