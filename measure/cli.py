@@ -13,11 +13,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import csv
-import glob
 import json
 import os
-import re
 import sys
 import tempfile
 from pathlib import Path
@@ -40,47 +37,54 @@ def _enable_x64():
 
 
 # ----------------------------------------------------------------------------- single measurement
-def _merge_frames(paths, saturation, dark):
-    """Read exposure brackets (exposure in each header's ``jsss_exposure``) and merge them."""
-    from .exr import ExrImage, read_exr
+def _merge_frames(paths, saturation, dark, white_balance="none"):
+    """Read exposure brackets (exposure time from each file's metadata: the EXR attribute
+    ``jsss_exposure``, a raw or TIFF file's exposure time x ISO / 100) and merge them."""
+    from .exr import ExrImage
+    from .photo import read_image
     from .profile import merge_brackets
 
-    frames = [read_exr(p) for p in paths]
+    frames = [read_image(p, white_balance=white_balance) for p in paths]
     missing = [str(f.path) for f in frames if "jsss_exposure" not in f.header]
     if missing:
-        raise UsageError(f"{missing[0]}: bracket without an exposure time (header attribute jsss_exposure)")
+        raise UsageError(f"{missing[0]}: bracket without an exposure time (EXR header attribute jsss_exposure, or "
+                         "the exposure time of a raw/TIFF file's metadata)")
     if saturation is None:
-        raise UsageError("several measurement frames need --saturation (the clip level of a frame)")
-    dark_pixels = None if dark is None else read_exr(dark, frames[0].channels).pixels
+        levels = {f.header.get("jsss_saturation") for f in frames}
+        if None in levels or len(levels) != 1:
+            raise UsageError("several measurement frames need --saturation (the clip level of a frame)")
+        saturation = levels.pop()  # raw and integer files know their clip level
+    dark_pixels = None if dark is None else read_image(dark, frames[0].channels, white_balance=white_balance).pixels
     merged = merge_brackets([f.pixels for f in frames], [f.header["jsss_exposure"] for f in frames],
                             saturation=saturation, dark=dark_pixels, names=[str(f.path) for f in frames])
-    return ExrImage(merged, frames[0].channels, frames[0].header, frames[0].path)
+    return ExrImage(merged, frames[0].channels, {**frames[0].header, "jsss_merged": True}, frames[0].path)
 
 
 def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference_reflectance=0.99, model="dipole",
-                  g=0.0, view_angle_deg=0.0, grid=None, saturation=None):
+                  g=0.0, view_angle_deg=0.0, grid=None, saturation=None, white_balance="none"):
     from .checks import MeasurementError
-    from .exr import read_exr
     from .pipeline import fit_measurement
+    from .photo import read_image
 
     paths = measurement if isinstance(measurement, (list, tuple)) else [measurement]
-    if len(paths) > 1:
-        meas = _merge_frames(paths, saturation, dark)
-        dark_for_fit = None  # already subtracted from the merged frames
-    else:
-        meas = read_exr(paths[0])
-        dark_for_fit = dark
-    ref = read_exr(reference, meas.channels)
-    dark_img = read_exr(dark, meas.channels) if dark else None
+    merged = len(paths) > 1
+    # Merged brackets are per unit exposure with the dark frame already subtracted.
+    meas = (_merge_frames(paths, saturation, dark, white_balance) if merged
+            else read_image(paths[0], white_balance=white_balance))
+    ref = read_image(reference, meas.channels, white_balance=white_balance)
+    dark_img = read_image(dark, meas.channels, white_balance=white_balance) if dark else None
     for img in [ref] + ([dark_img] if dark_img else []):
         if img.pixels.shape != meas.pixels.shape:
             raise UsageError(f"{img.path}: shape {img.pixels.shape} differs from {meas.path} {meas.pixels.shape}")
-    if len(paths) == 1:
+    if not merged:
         _check_saturation(meas)
     _check_saturation(ref)
-    if dark_img is not None and dark_for_fit is None:
-        ref = type(ref)(ref.pixels - dark_img.pixels, ref.channels, ref.header, ref.path)
-        dark_img = None
+    # Dark frame off (it was taken at the frames' exposure), then each frame per unit exposure
+    # where its file records one (raw and TIFF metadata, the EXR attribute jsss_exposure), so
+    # that a measurement and a reference exposed differently calibrate correctly.
+    offset = 0.0 if dark_img is None else dark_img.pixels
+    meas_pixels = meas.pixels if merged else (meas.pixels - offset) / meas.header.get("jsss_exposure", 1.0)
+    ref_pixels = (ref.pixels - offset) / ref.header.get("jsss_exposure", 1.0)
     if pixel_mm is None:
         pixel_mm = meas.header.get("jsss_pixel_mm")
         if pixel_mm is None:
@@ -102,8 +106,7 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
         except ValueError as error:
             raise UsageError(f"--model transport: {error} (--model dipole fits any eta, with diffusion's bias)") from None
     try:
-        return fit_measurement(meas.pixels, ref.pixels, float(pixel_mm), float(eta),
-                               dark=None if dark_img is None else dark_img.pixels,
+        return fit_measurement(meas_pixels, ref_pixels, float(pixel_mm), float(eta),
                                reference_reflectance=reference_reflectance, model=model, g=g,
                                view_angle_deg=view_angle_deg,
                                channels=meas.channels, grid=grid)
@@ -112,7 +115,15 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
 
 
 def _check_saturation(image):
-    """Clipped highlights show as several pixels sharing the exact maximum of a channel."""
+    """Clipped highlights: pixels at the file's clip level (raw, TIFF, PNG), or in an EXR
+    several pixels sharing the exact maximum of a channel."""
+    level = image.header.get("jsss_saturation")
+    if level is not None and not image.header.get("jsss_merged"):
+        clipped = int(np.count_nonzero(np.any(image.pixels >= level, axis=-1)))
+        if clipped:
+            raise UsageError(f"{image.path}: {clipped} pixel(s) clipped at the sensor's saturation; use a shorter "
+                             "exposure or merge brackets")
+        return
     for c, name in enumerate(image.channels):
         channel = image.pixels[..., c]
         peak = channel.max()
@@ -172,7 +183,7 @@ def _single(args) -> int:
     _say(args, f"fitting {args.model} to {len(args.measurement)} frame(s) (the first fit compiles: 10-20 s)")
     fit_args = dict(pixel_mm=args.pixel_mm, eta=args.eta, dark=args.dark,
                     reference_reflectance=args.reference_reflectance, g=args.g, view_angle_deg=_view_angle(args),
-                    saturation=args.saturation)
+                    saturation=args.saturation, white_balance=args.white_balance)
     result = _load_and_fit(args.measurement, args.reference, model=args.model, **fit_args)
     comparison = None
     if args.model == "dipole":
@@ -300,76 +311,6 @@ def _demo(args) -> int:
     return 0
 
 
-# ----------------------------------------------------------------------------- batch
-_ROLE = re.compile(r"_(ref|dark)$|_ref_t\d+$|_t\d+$")
-
-
-def _find_jobs(target, manifest):
-    """(measurement, reference, dark, overrides) tuples from a manifest or the naming rule."""
-    if manifest:
-        manifest = Path(manifest)
-        if not manifest.is_file():
-            raise UsageError(f"{manifest}: no such manifest")
-        jobs = []
-        with manifest.open(newline="") as handle:
-            reader = csv.DictReader(handle)
-            if not reader.fieldnames or not {"measurement", "reference"} <= set(reader.fieldnames):
-                raise UsageError(f"{manifest}: needs columns measurement,reference[,dark,pixel_mm,eta,reference_reflectance]")
-            for row in reader:
-                base = manifest.parent
-                overrides = {k: float(row[k]) for k in ("pixel_mm", "eta", "reference_reflectance") if row.get(k)}
-                jobs.append((base / row["measurement"], base / row["reference"],
-                             (base / row["dark"]) if row.get("dark") else None, overrides))
-        return jobs
-    path = Path(target)
-    if not path.is_dir() and not glob.has_magic(str(target)):
-        raise UsageError(f"{target}: no such directory" + ("" if not path.exists() else " (a file: give its directory, "
-                                                           "a glob or --manifest)"))
-    candidates = sorted(path.glob("*.exr")) if path.is_dir() else sorted(Path(p) for p in glob.glob(str(target)))
-    candidates = [p for p in candidates if not _ROLE.search(p.stem)]
-    if not candidates:
-        raise UsageError(f"{target}: no measurement EXRs found (NAME.exr with NAME_ref.exr beside it)")
-    jobs = []
-    for m in candidates:
-        dark = m.with_name(f"{m.stem}_dark.exr")
-        jobs.append((m, m.with_name(f"{m.stem}_ref.exr"), dark if dark.exists() else None, {}))
-    return jobs
-
-
-def _progress(done, total, label, stream=sys.stderr):
-    width = 30
-    filled = int(width * done / max(total, 1))
-    stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label[:40]:<40}")
-    if done == total:
-        stream.write("\n")
-    stream.flush()
-
-
-def _rows(jobs, args):
-    from jsss import hankel
-
-    grid = hankel.hankel_grid()
-    rows = []
-    for i, (measurement, reference, dark, overrides) in enumerate(jobs):
-        _progress(i, len(jobs), measurement.name)
-        row = {"file": str(measurement), "status": "ok", "error": ""}
-        try:
-            result = _load_and_fit(measurement, reference, pixel_mm=overrides.get("pixel_mm", args.pixel_mm),
-                                   eta=overrides.get("eta", args.eta), dark=dark,
-                                   reference_reflectance=overrides.get("reference_reflectance", args.reference_reflectance),
-                                   model=args.model, g=args.g, view_angle_deg=_view_angle(args), grid=grid)
-            table = result.table()
-            for key in ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance",
-                        "mean_free_path_mm", "rel_residual", "chi2_reduced", "converged", "quality"):
-                for ch, value in zip(table["channels"], table[key]):
-                    row[f"{key}_{ch}"] = value
-        except Exception as error:  # recorded in the table, never dropped
-            row.update(status="failed", error=f"{type(error).__name__}: {error}")
-        rows.append(row)
-    _progress(len(jobs), len(jobs), "done")
-    return rows
-
-
 def _write_atomically(out, write):
     """``write(tmp_path)`` to a temp file beside ``out``, then rename: no partial files."""
     out = Path(out)
@@ -392,65 +333,11 @@ def _write_text(out, text):
     _write_atomically(out, write)
 
 
-def _write_table(rows, out):
-    """Write CSV (or Parquet) atomically (temp file beside ``out``, then rename): no partial tables."""
-    out = Path(out)
-    # Columns in the order the rows hold them (the image's channel order, e.g. R, G, B), not sorted.
-    columns = list(dict.fromkeys(["file", "status", "error"] + [k for r in rows for k in r]))
-
-    def write(tmp):
-        if out.suffix == ".parquet":
-            try:
-                import pyarrow as pa
-                import pyarrow.parquet as pq
-            except ImportError:
-                raise UsageError(f"{out}: writing .parquet needs pyarrow; install it or use .csv") from None
-            pq.write_table(pa.Table.from_pylist([{c: r.get(c) for c in columns} for r in rows]), tmp)
-        else:
-            with open(tmp, "w", newline="") as handle:
-                writer = csv.DictWriter(handle, fieldnames=columns)
-                writer.writeheader()
-                writer.writerows(rows)
-
-    _write_atomically(out, write)
-
-
-def _batch(argv) -> int:
-    parser = argparse.ArgumentParser(prog=f"{PROG} batch", description=(
-        "Fit many measurements. Naming rule: NAME.exr is a measurement, NAME_ref.exr its reference, NAME_dark.exr "
-        "its optional dark frame; or list them in a manifest CSV (columns measurement, reference, and optionally dark, "
-        "pixel_mm, eta, reference_reflectance; paths relative to the manifest). A file that fails becomes a row with "
-        "status 'failed' and its error."))
-    parser.add_argument("target", nargs="?", help="directory or glob of measurement EXRs")
-    parser.add_argument("--out", required=True, help="output table (.csv, or .parquet with pyarrow)")
-    parser.add_argument("--manifest", help="CSV listing the measurements instead of the naming rule")
-    parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
-    parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
-    parser.add_argument("--reference-reflectance", type=float, default=0.99,
-                        help="total reflectance of the reference (default 0.99, Spectralon)")
-    parser.add_argument("--model", default="transport", choices=["dipole", "transport"],
-                        help="profile model: transport (default; scaled Monte Carlo tables, exact to radiative "
-                             "transfer, eta 1.0-1.6) or dipole (diffusion: tens of percent off near the source)")
-    parser.add_argument("--g", type=float, default=0.0,
-                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9; default 0)")
-    _camera_arguments(parser)
-    parser.add_argument("--version", action="version", version=_version())
-    args = parser.parse_args(argv)
-    if not args.target and not args.manifest:
-        raise UsageError("batch needs a directory/glob or --manifest")
-    jobs = _find_jobs(args.target, args.manifest)
-    _enable_x64()
-    rows = _rows(jobs, args)
-    _write_table(rows, args.out)
-    failed = [r for r in rows if r["status"] != "ok"]
-    print(f"{len(rows) - len(failed)} fitted, {len(failed)} failed; table written to {args.out}")
-    for r in failed:
-        print(f"  failed: {r['file']}: {r['error']}", file=sys.stderr)
-    return 1 if failed else 0
-
-
 # ----------------------------------------------------------------------------- entry point
 def _camera_arguments(parser):
+    parser.add_argument("--white-balance", default="none", choices=("none", "camera", "daylight"),
+                        help="multipliers applied to raw files (default none: the white reference calibrates each "
+                             "channel); the choice is recorded")
     parser.add_argument("--view-angle", type=float, default=0.0, metavar="DEG",
                         help="the camera's angle from the sample's normal in degrees (default 0: straight down); "
                              "pixels record radiance toward it")
@@ -472,10 +359,11 @@ def _parser():
     parser = argparse.ArgumentParser(prog=PROG, description=(
         "Recover sigma_a and sigma_s' per channel from a beam-profile HDR image and a white reference "
         "(Jensen et al. 2001). Also: 'fit-params batch ...' for many files."))
-    parser.add_argument("measurement", nargs="*", help="measurement EXR (linear HDR), or several exposure brackets "
-                        "(each with its exposure in the header attribute jsss_exposure) to merge")
-    parser.add_argument("--reference", help="white-reference EXR, same beam and camera")
-    parser.add_argument("--dark", help="dark-frame EXR subtracted from both")
+    parser.add_argument("measurement", nargs="*", help="measurement image: EXR (linear HDR), a camera raw file "
+                        "(.dng, .cr2, .nef, .arw, ...) or a 16-bit linear TIFF/PNG; or several exposure brackets to "
+                        "merge (exposure from each raw/TIFF file's metadata, or the EXR attribute jsss_exposure)")
+    parser.add_argument("--reference", help="white-reference image, same beam and camera")
+    parser.add_argument("--dark", help="dark-frame image subtracted from both")
     parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
     parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
     parser.add_argument("--reference-reflectance", type=float, default=0.99,
@@ -514,7 +402,9 @@ def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if argv and argv[0] == "batch":
-            return _batch(argv[1:])
+            from .batch import batch
+
+            return batch(argv[1:])
         args = _parser().parse_args(argv)
         _enable_x64()
         if args.keep and not args.demo:

@@ -88,10 +88,17 @@ def test_single_measurement_table_and_plot(measurements, tmp_path):
     assert plot.stat().st_size > 1000
 
 
-def test_batch_writes_every_row_atomically_and_reports_failures(measurements, tmp_path):
+@pytest.fixture(scope="module")
+def serial_batch(measurements, tmp_path_factory):
+    """The batch of the fixture's images fitted in one process: (its output folder, the run)."""
+    folder = tmp_path_factory.mktemp("serial")
+    return folder, run("batch", measurements, "--out", folder / "table.csv", "--eta", 1.3)
+
+
+def test_batch_writes_every_row_atomically_and_reports_failures(serial_batch):
     """Two fits and one failure (missing reference) give three rows; exit status 1; no temp files."""
+    tmp_path, out = serial_batch
     out_csv = tmp_path / "table.csv"
-    out = run("batch", measurements, "--out", out_csv, "--eta", 1.3)
     assert out.returncode == 1, out.stderr
     rows = list(csv.DictReader(out_csv.open()))
     assert len(rows) == 3
@@ -106,6 +113,25 @@ def test_batch_writes_every_row_atomically_and_reports_failures(measurements, tm
     assert [h for h in header if h.startswith("sigma_a_") and "err" not in h] == ["sigma_a_R", "sigma_a_G", "sigma_a_B"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv"]
     assert "3/3" in out.stderr  # the progress bar ran to the end
+
+
+def test_batch_on_dask_workers_matches_one_process_and_resumes(measurements, serial_batch, tmp_path):
+    """Two local Dask workers give the rows one process gives (same numbers, same order, the
+    failure recorded); --resume keeps the fitted rows and fits only the failed one again."""
+    serial, parallel = serial_batch[0] / "table.csv", tmp_path / "parallel.csv"
+    out = run("batch", measurements, "--out", parallel, "--eta", 1.3, "--workers", 2)
+    assert out.returncode == 1, out.stderr
+    assert "2 workers" in out.stderr and "3/3" in out.stderr
+    one, two = list(csv.DictReader(serial.open())), list(csv.DictReader(parallel.open()))
+    assert [r["file"] for r in one] == [r["file"] for r in two]
+    for a, b in zip(one, two):
+        assert a["status"] == b["status"]
+        if a["status"] == "ok":
+            np.testing.assert_allclose([float(b[f"sigma_a_{c}"]) for c in "RGB"],
+                                       [float(a[f"sigma_a_{c}"]) for c in "RGB"], rtol=1e-8)
+    again = run("batch", measurements, "--out", parallel, "--eta", 1.3, "--resume")
+    assert again.returncode == 1 and "resuming: 2 row(s)" in again.stderr and "1 to fit" in again.stderr
+    assert list(csv.DictReader(parallel.open())) == two
 
 
 def test_manifest_lists_measurements(measurements, tmp_path):

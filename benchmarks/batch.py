@@ -1,0 +1,76 @@
+"""fit-params batch throughput against the number of Dask workers (images per second).
+
+    python benchmarks/batch.py [--images 50] [--size 256] [--workers 1 2 4]
+
+Writes ``--images`` synthetic camera images (marble, skin1, apple, ketchup in turn; transport
+tables, shot and read noise) to a temporary folder, then times ``fit-params batch`` on them
+once per worker count: the whole command as a user runs it (start-up, compilation in every
+worker, fits, the table), so the ratio to one worker is what a user gains. Each worker runs
+XLA single-threaded (``measure.batch._WORKER_ENV``); one worker is the in-process path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+from jsss import hankel  # noqa: E402
+from jsss.materials import jensen2001  # noqa: E402
+from measure.synth import synthesize, write_measurement  # noqa: E402
+
+MATERIALS = ("marble", "skin1", "apple", "ketchup")
+ETA = {"marble": 1.5, "skin1": 1.3, "apple": 1.3, "ketchup": 1.3}
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--images", type=int, default=50)
+    parser.add_argument("--size", type=int, default=256)
+    parser.add_argument("--workers", type=int, nargs="*", default=[1, 2, 4])
+    args = parser.parse_args(argv)
+    load = os.getloadavg()[0]
+    print(f"# benchmarks/batch.py, {time.strftime('%Y-%m-%d')}, {platform.machine()} x{os.cpu_count()} cores, "
+          f"load {load:.1f}; {args.images} images of {args.size}^2, transport model")
+    with tempfile.TemporaryDirectory() as folder:
+        grid = hankel.hankel_grid()
+        manifest = ["measurement,reference,dark,eta"]
+        for i in range(args.images):
+            name = MATERIALS[i % len(MATERIALS)]
+            s = synthesize(jensen2001(name), size=args.size, photons_per_unit=1e5, seed=i, grid=grid,
+                           model="transport")
+            write_measurement(folder, s, name=f"{name}{i}")
+            manifest.append(f"{name}{i}.exr,{name}{i}_ref.exr,{name}{i}_dark.exr,{ETA[name]}")
+        with open(os.path.join(folder, "manifest.csv"), "w") as handle:
+            handle.write("\n".join(manifest) + "\n")
+        print("| workers | seconds | images / s | x one worker | failed rows |")
+        print("|---:|---:|---:|---:|---:|")
+        base = None
+        for workers in args.workers:
+            out = os.path.join(folder, f"table{workers}.csv")
+            t0 = time.perf_counter()
+            run = subprocess.run([sys.executable, "-m", "measure.cli", "batch", "--manifest",
+                                  os.path.join(folder, "manifest.csv"), "--out", out, "--workers", str(workers)],
+                                 capture_output=True, text=True, stdin=subprocess.DEVNULL)
+            seconds = time.perf_counter() - t0
+            failed = sum(1 for line in open(out) if ",failed," in line) if os.path.exists(out) else args.images
+            base = base or seconds
+            print(f"| {workers} | {seconds:.1f} | {args.images / seconds:.2f} | {base / seconds:.2f} | {failed} |",
+                  flush=True)
+            if run.returncode not in (0, 1):
+                print(run.stderr[-2000:], file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
