@@ -31,7 +31,25 @@ from .profiles import exact_profile
 from .scene import Scene
 from .shading import diffuse_radiance
 
-__all__ = ["ReferenceFrame", "reference_radiance", "surface_samples"]
+__all__ = ["ReferenceFrame", "reference_radiance", "surface_samples", "white_lambertian_radiance"]
+
+
+def white_lambertian_radiance(scene: Scene) -> np.ndarray:
+    r"""What the camera sees of a white Lambertian object of the scene's shape: :math:`E / \pi`.
+
+    (H, W, 3) radiance, with the scene's lights and shadows, zero off the object. The upper
+    bound of any material's diffuse light (energy conservation), and the exposure that shows
+    a render at its true brightness; ``benchmarks/transport_truth.py`` checks it against
+    Mitsuba to prove both renderers light and see the scene alike.
+    """
+    buffers = camera_buffers(scene.mesh, scene.camera)
+    radiance = 0.0
+    for light in scene.lights:
+        g = light_geometry(buffers.position, buffers.normal, buffers.mask, light,
+                           shadow_map(scene.mesh, light, size=scene.shadow_map_size))
+        arriving = np.clip(np.asarray(g.cosine), 0, None) * np.asarray(g.falloff) * np.asarray(g.visible)
+        radiance = radiance + arriving[..., None] * np.asarray(light.color) * light.intensity
+    return np.asarray(radiance / np.pi * np.asarray(buffers.mask)[..., None], dtype=float)
 
 
 @dataclass(frozen=True, eq=False)
