@@ -19,7 +19,7 @@ import re
 import sys
 from pathlib import Path
 
-from .cli import PROG, UsageError, _camera_arguments, _enable_x64, _load_and_fit, _version, _view_angle, \
+from .cli import PROG, UsageError, _fit_arguments, _enable_x64, _load_and_fit, _version, _view_angle, \
     _write_atomically
 
 __all__ = ["batch"]
@@ -207,16 +207,7 @@ def batch(argv) -> int:
     parser.add_argument("target", nargs="?", help="directory or glob of measurement EXRs")
     parser.add_argument("--out", required=True, help="output table (.csv, or .parquet with pyarrow)")
     parser.add_argument("--manifest", help="CSV listing the measurements instead of the naming rule")
-    parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
-    parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
-    parser.add_argument("--reference-reflectance", type=float, default=0.99,
-                        help="total reflectance of the reference (default 0.99, Spectralon)")
-    parser.add_argument("--model", default="transport", choices=["dipole", "transport"],
-                        help="profile model: transport (default; scaled Monte Carlo tables, exact to radiative "
-                             "transfer, eta 1.0-1.6) or dipole (diffusion: tens of percent off near the source)")
-    parser.add_argument("--g", type=float, default=0.0,
-                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9; default 0)")
-    _camera_arguments(parser)
+    _fit_arguments(parser)
     parser.add_argument("--workers", type=int, default=1,
                         help="local Dask worker processes fitting in parallel (default 1: in this process); each "
                              "compiles the fit once and reuses it for its images")

@@ -334,7 +334,17 @@ def _write_text(out, text):
 
 
 # ----------------------------------------------------------------------------- entry point
-def _camera_arguments(parser):
+def _fit_arguments(parser):
+    """The options of a fit, shared by a single fit and ``batch``."""
+    parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
+    parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
+    parser.add_argument("--reference-reflectance", type=float, default=0.99,
+                        help="total reflectance of the reference (default 0.99, Spectralon)")
+    parser.add_argument("--model", default="transport", choices=["dipole", "transport"],
+                        help="profile model: transport (default; scaled Monte Carlo tables, exact to radiative "
+                             "transfer, eta 1.0-1.6) or dipole (diffusion: tens of percent off near the source)")
+    parser.add_argument("--g", type=float, default=0.0,
+                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9; default 0)")
     parser.add_argument("--white-balance", default="none", choices=("none", "camera", "daylight"),
                         help="multipliers applied to raw files (default none: the white reference calibrates each "
                              "channel); the choice is recorded")
@@ -364,17 +374,8 @@ def _parser():
                         "merge (exposure from each raw/TIFF file's metadata, or the EXR attribute jsss_exposure)")
     parser.add_argument("--reference", help="white-reference image, same beam and camera")
     parser.add_argument("--dark", help="dark-frame image subtracted from both")
-    parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
-    parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
-    parser.add_argument("--reference-reflectance", type=float, default=0.99,
-                        help="total reflectance of the reference (default 0.99, Spectralon)")
     parser.add_argument("--saturation", type=float, help="clip level of a bracket (needed with several frames)")
-    parser.add_argument("--model", default="transport", choices=["dipole", "transport"],
-                        help="profile model: transport (default; scaled Monte Carlo tables, exact to radiative "
-                             "transfer, eta 1.0-1.6) or dipole (diffusion: tens of percent off near the source)")
-    parser.add_argument("--g", type=float, default=0.0,
-                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9; default 0)")
-    _camera_arguments(parser)
+    _fit_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--plot", help="write a PNG of the profile and the fit")
     parser.add_argument("--export", action="append", choices=sorted(EXPORTS), metavar="FORMAT",
