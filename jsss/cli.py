@@ -40,16 +40,15 @@ def info_lines() -> list[str]:
     Reads the configuration without changing it: float64 is reported as this process has it
     (the console scripts that fit turn it on for themselves).
     """
-    import os
     import platform
     import sys
 
     import jax
 
     from . import __version__
-    from .render.normal_filter import default_cache_dir
+    from .cache import compilation_cache_dir, default_cache_dir
 
-    jax_cache = os.environ.get("JAX_COMPILATION_CACHE_DIR") or jax.config.jax_compilation_cache_dir or "off"
+    jax_cache = compilation_cache_dir() or "off (JSSS_COMPILATION_CACHE=0)"
     try:
         devices = ", ".join(f"{d.platform}:{d.id} ({d.device_kind})" for d in jax.devices())
     except RuntimeError as error:  # a misconfigured backend still gets a report
@@ -61,7 +60,7 @@ def info_lines() -> list[str]:
                                                        "OpenEXR", "mitsuba")),
         f"float64 (jax_enable_x64): {'on' if jax.config.jax_enable_x64 else 'off'} in this process",
         f"jsss cache (JSSS_CACHE_DIR): {default_cache_dir()}",
-        f"JAX compilation cache (JAX_COMPILATION_CACHE_DIR): {jax_cache}",
+        f"compilation cache of the commands (JAX_COMPILATION_CACHE_DIR): {jax_cache}",
         f"devices: {devices}",
     ]
 

@@ -110,7 +110,7 @@ def _fit_row(job, options) -> dict:
 
 # Workers run single-threaded XLA: a fit's dense transforms would otherwise take every core
 # in every worker, and N workers would fight over the same cores.
-_WORKER_ENV = {"XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+_WORKER_ENV = {"XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false",
                "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 

@@ -31,9 +31,13 @@ class UsageError(ValueError):
 
 
 def _enable_x64():
+    """Console-script setup of JAX: float64 (fits need it) and the persistent compilation cache."""
     import jax
 
+    from jsss.cache import enable_compilation_cache
+
     jax.config.update("jax_enable_x64", True)
+    enable_compilation_cache()
 
 
 # ----------------------------------------------------------------------------- single measurement

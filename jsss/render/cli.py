@@ -120,6 +120,9 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)  # planning fits profiles in float64
+    from ..cache import enable_compilation_cache
+
+    enable_compilation_cache()  # a command's compiled programs are kept on disk for the next run
 
     from ..exr import ExrError
     from . import SceneError

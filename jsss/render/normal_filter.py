@@ -37,6 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..cache import default_cache_dir
 from .mesh import Mesh, weld
 
 __all__ = ["Spectrum", "cotangent_laplacian", "default_cache_dir", "laplacian_spectrum", "smooth_normals",
@@ -93,13 +94,6 @@ class Spectrum:
     mass: np.ndarray
     index: np.ndarray
     nyquist: float
-
-
-def default_cache_dir() -> Path:
-    """``$JSSS_CACHE_DIR``, else ``$XDG_CACHE_HOME/jsss``, else ``~/.cache/jsss``."""
-    if os.environ.get("JSSS_CACHE_DIR"):
-        return Path(os.environ["JSSS_CACHE_DIR"])
-    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "jsss"
 
 
 def _compute_spectrum(mesh: Mesh, count: int) -> Spectrum:

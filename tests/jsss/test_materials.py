@@ -54,5 +54,8 @@ def test_info_reports_versions_caches_precision_and_devices(monkeypatch, tmp_pat
         assert info[key] and info[key] != "not installed"
     assert info["float64 (jax_enable_x64)"].startswith("on")  # the test suite enables it
     assert info["jsss cache (JSSS_CACHE_DIR)"] == str(tmp_path / "cache")
-    assert info["JAX compilation cache (JAX_COMPILATION_CACHE_DIR)"] == str(tmp_path / "xla")
+    assert info["compilation cache of the commands (JAX_COMPILATION_CACHE_DIR)"] == str(tmp_path / "xla")
+    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR")
+    info = dict(line.split(": ", 1) for line in info_lines())
+    assert info["compilation cache of the commands (JAX_COMPILATION_CACHE_DIR)"] == str(tmp_path / "cache" / "xla")
     assert "cpu" in info["devices"]
