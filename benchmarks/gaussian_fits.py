@@ -3,7 +3,9 @@
 Table 1: batched, jitted optimistix Levenberg-Marquardt (``fitting.fit_gaussians``, all
 starts and channels in one vmapped call) against SciPy's ``least_squares(method="lm")``
 run one start at a time, with the same grid, parameterisation, starts and number of
-starts. Table 2: number of Gaussians against error and time, for LM and for the
+starts; and ``fit_gaussians``' default, one start from its closed-form seed with random
+starts only where the seed's error exceeds 2 % (the same SciPy multistart is the baseline).
+Table 2: number of Gaussians against error and time, for the default fit and for the
 closed-form empirical fit (``jsss.gaussians.empirical_dipole_fit``, 8 Gaussians).
 
 Run: ``python benchmarks/gaussian_fits.py [--starts 8]``
@@ -68,17 +70,20 @@ def main():
     print(f"36 Jensen 2001 channels, {args.starts} starts each, {platform}, {today}")
     print(f"{'method':<34} {'n':>2} {'max rel_rms %':>14} {'median %':>9} {'wall s':>8} {'speed vs scipy':>15}")
     for n in (4, 8):
-        fit = fit_gaussians(R, P, n, n_starts=args.starts)
-        jax.block_until_ready(fit.rel_rms)
-        t_jax = median_seconds(lambda: jax.block_until_ready(fit_gaussians(R, P, n, n_starts=args.starts).rel_rms),
-                               repeats=3)
         start = time.perf_counter()
         errors = [scipy_fit(R_np[:, c], P_np[:, c], n, args.starts, keys[c]) for c in range(P.shape[1])]
         t_scipy = time.perf_counter() - start
-        e_jax = 100 * np.asarray(fit.rel_rms)
         e_sp = 100 * np.asarray(errors)
         print(f"{'scipy least_squares(lm), serial':<34} {n:>2} {e_sp.max():>14.3f} {np.median(e_sp):>9.3f} {t_scipy:>8.2f} {1.0:>14.1f}x")
-        print(f"{'optimistix LM, jit + vmap':<34} {n:>2} {e_jax.max():>14.3f} {np.median(e_jax):>9.3f} {t_jax:>8.2f} {t_scipy / t_jax:>14.1f}x")
+        for label, init in (("optimistix LM, random starts", "random"), ("optimistix LM, seed (+ retries)", "seed")):
+            fit = fit_gaussians(R, P, n, n_starts=args.starts, init=init)
+            jax.block_until_ready(fit.rel_rms)
+            t_jax = median_seconds(lambda: jax.block_until_ready(
+                fit_gaussians(R, P, n, n_starts=args.starts, init=init).rel_rms), repeats=3)
+            e_jax = 100 * np.asarray(fit.rel_rms)
+            lost = int(np.sum(e_jax > e_sp + 1e-2))  # channels where it misses scipy's best by > 0.01 points
+            print(f"{label:<34} {n:>2} {e_jax.max():>14.3f} {np.median(e_jax):>9.3f} {t_jax:>8.2f} {t_scipy / t_jax:>14.1f}x"
+                  f"   (worse than scipy's multistart on {lost} channels)")
 
     print(f"\naccuracy vs time (36 channels, {today})")
     print(f"{'method':<28} {'n':>2} {'max rel_rms %':>14} {'median %':>9} {'wall ms':>9}")
@@ -86,7 +91,7 @@ def main():
         fit = fit_gaussians(R, P, n, n_starts=args.starts)
         t = median_seconds(lambda: jax.block_until_ready(fit_gaussians(R, P, n, n_starts=args.starts).rel_rms), repeats=3)
         e = 100 * np.asarray(fit.rel_rms)
-        print(f"{'LM (' + str(args.starts) + ' starts)':<28} {n:>2} {e.max():>14.3f} {np.median(e):>9.3f} {1e3 * t:>9.1f}")
+        print(f"{'LM (seed + retries)':<28} {n:>2} {e.max():>14.3f} {np.median(e):>9.3f} {1e3 * t:>9.1f}")
     media = [jensen2001(name) for name in jensen2001_names()]
     empirical = jax.jit(lambda ms: [empirical_dipole_fit(m) for m in ms])
     jax.block_until_ready(empirical(media))

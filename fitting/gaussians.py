@@ -3,11 +3,14 @@ r"""Sum-of-Gaussians fits by Levenberg-Marquardt (d'Eon et al. 2007 sec. 4, eqs.
 Minimises the d'Eon objective :math:`\int_0^\infty r\,(R(r) - \sum_i w_i G(v_i, r))^2\,dr`
 on a radial grid (trapezoid weights), with weights and variances kept positive by
 parameterisation (:math:`w_i = e^{a_i}`, :math:`v_i = e^{b_i}`; with a prescribed total,
-:math:`w = R_d\,\mathrm{softmax}(a)`). The objective has many local minima, so every fit
-runs ``n_starts`` starts from log-uniform random variances, all in one jitted, ``vmap``-ped
-call of optimistix's Levenberg-Marquardt, and keeps the best. Gradients of the result with
-respect to the profile flow through the solver by the implicit function theorem
-(optimistix's ``ImplicitAdjoint``).
+:math:`w = R_d\,\mathrm{softmax}(a)`). The objective has many local minima. By default
+(``init="seed"``) each fit starts once from a closed-form seed (variances log-spaced across
+the profile's own radii, weights from the linear least-squares problem they leave) and only
+the profiles whose error then exceeds ``retry_above`` get ``n_starts`` random starts as
+well; ``init="random"`` runs the random starts for every profile. All starts and profiles
+run in one jitted, ``vmap``-ped call of optimistix's Levenberg-Marquardt per round, and the
+best is kept. Gradients of the result with respect to the profile flow through the solver
+by the implicit function theorem (optimistix's ``ImplicitAdjoint``).
 """
 
 from __future__ import annotations
@@ -114,24 +117,48 @@ def _starts(key, n_starts, n, r, profile_total_guess):
     return a, b
 
 
-@partial(jax.jit, static_argnames=("n", "n_starts", "max_steps", "constrained"))
-def _fit_batch(radii, profiles, totals, key, *, n, n_starts, max_steps, rtol, atol, constrained):
-    """Fit every row of ``profiles`` (M, N) on its own grid ``radii`` (M, N), all in one call."""
+def _seed(r, profile, q, n, constrained):
+    """A closed-form start: variances log-spaced between the squares of the radii that hold
+    1 % and 99 % of the profile's light, weights from the d'Eon objective's normal equations
+    at those variances (linear in the weights), floored at 1e-6 of the largest."""
+    energy = jnp.cumsum(2 * jnp.pi * q * jnp.maximum(profile, 0))
+    energy = energy / jnp.maximum(energy[-1], 1e-300)
+    r_lo = jnp.interp(0.01, energy, r)
+    r_hi = jnp.maximum(jnp.interp(0.99, energy, r), 1.01 * r_lo)
+    variances = jnp.geomspace(r_lo**2 / 2, r_hi**2 / 2, n)
+    g = jnp.exp(-(r[:, None] ** 2) / (2 * variances)) / (2 * jnp.pi * variances)  # (N, n)
+    gram = (g * q[:, None]).T @ g
+    rhs = (g * q[:, None]).T @ profile
+    scale = jnp.trace(gram) / n
+    weights = jnp.linalg.solve(gram + 1e-10 * scale * jnp.eye(n, dtype=r.dtype), rhs)
+    weights = jnp.maximum(weights, 1e-6 * jnp.max(jnp.abs(weights)) + 1e-300)
+    a = jnp.log(weights / jnp.sum(weights)) if constrained else jnp.log(weights)
+    return a[None], jnp.log(variances)[None]
+
+
+@partial(jax.jit, static_argnames=("n", "n_starts", "max_steps", "constrained", "seeded"))
+def _fit_batch(radii, profiles, totals, keys, *, n, n_starts, max_steps, rtol, atol, constrained, seeded):
+    """Fit every row of ``profiles`` (M, N) on its own grid ``radii`` (M, N), all in one call:
+    from the closed-form seed alone (``seeded``) or from ``n_starts`` random starts drawn
+    with each profile's own key (so a profile's random starts do not depend on the others)."""
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    keys = jax.random.split(key, profiles.shape[0])
 
     def one(r, profile, total, k):
         q = _trapezoid_weights(r) * r
-        guess = jnp.maximum(2 * jnp.pi * jnp.sum(q * profile), 1e-12)
-        a, b = _starts(k, n_starts, n, r, guess)
-        if constrained:
-            a = jnp.zeros_like(a)  # softmax weights: equal shares of the total
+        if seeded:
+            a, b = _seed(r, profile, q, n, constrained)
+        else:
+            guess = jnp.maximum(2 * jnp.pi * jnp.sum(q * profile), 1e-12)
+            a, b = _starts(k, n_starts, n, r, guess)
+            if constrained:
+                a = jnp.zeros_like(a)  # softmax weights: equal shares of the total
         return _fit_one(profile, total if constrained else None, (a, b), r, jnp.sqrt(q), solver, max_steps)
 
     return jax.vmap(one)(radii, profiles, totals, keys)
 
 
-def fit_gaussians(r, profile, n: int = 4, *, weight: Literal["r"] = "r", total=None, n_starts: int = 8,
+def fit_gaussians(r, profile, n: int = 4, *, weight: Literal["r"] = "r", total=None,
+                  init: Literal["seed", "random"] = "seed", n_starts: int = 8, retry_above: float = 0.02,
                   key=None, max_steps: int = 400, rtol: float = 1e-8, atol: float = 1e-10) -> GaussianFit:
     r"""Fit :math:`\sum_{i=1}^n w_i G(v_i, r)` to radial profiles (d'Eon 2007 eq. 6).
 
@@ -149,8 +176,16 @@ def fit_gaussians(r, profile, n: int = 4, *, weight: Literal["r"] = "r", total=N
         The objective's weight: ``"r"``, d'Eon's, the only one offered.
     total : array_like, optional, keyword-only
         If given (broadcast to ``B``), the weights are constrained to sum to it (eq. 9).
+    init : {"seed", "random"}, keyword-only
+        ``"seed"`` (default): one start from the closed-form seed, then ``n_starts`` random
+        starts only for the profiles whose relative RMS error is still above
+        ``retry_above`` (the better of the two results is kept). ``"random"``: ``n_starts``
+        random starts for every profile.
     n_starts : int, keyword-only
-        Random starts per profile; a single start often lands in a worse local minimum.
+        Random starts per profile (all of them with ``"random"``, the retries with ``"seed"``).
+    retry_above : float, keyword-only
+        Relative RMS error (a fraction; 0.02 is 2 %) above which a seeded fit is retried from
+        random starts; ``inf`` never retries, 0 always does.
     key : jax.random key, optional, keyword-only
         Seed for the starts (default ``jax.random.PRNGKey(0)``: reproducible).
     max_steps, rtol, atol : keyword-only
@@ -169,6 +204,10 @@ def fit_gaussians(r, profile, n: int = 4, *, weight: Literal["r"] = "r", total=N
         raise ValueError(f"fit_gaussians(weight={weight!r}): the only supported weight is 'r'.")
     if n < 1 or n_starts < 1:
         raise ValueError(f"fit_gaussians needs n >= 1 and n_starts >= 1; got n={n}, n_starts={n_starts}.")
+    if init not in ("seed", "random"):
+        raise ValueError(f"fit_gaussians(init={init!r}): one of 'seed', 'random'.")
+    if not retry_above >= 0:
+        raise ValueError(f"fit_gaussians(retry_above={retry_above!r}) must be >= 0 (a relative RMS error).")
     # Fits run in the widest float JAX offers (float64 under jax_enable_x64): the objective
     # spans many decades and LM's damping mixes in default-precision scalars.
     dtype = jnp.promote_types(jnp.asarray(profile).dtype, jnp.result_type(float))
@@ -189,9 +228,21 @@ def fit_gaussians(r, profile, n: int = 4, *, weight: Literal["r"] = "r", total=N
     radii = jnp.moveaxis(jnp.broadcast_to(r.reshape(r.shape + (1,) * (profile.ndim - r.ndim)), profile.shape)
                          .reshape(r.shape[0], -1), 0, 1)
     totals = jnp.zeros(flat.shape[0], flat.dtype) if total is None else jnp.broadcast_to(jnp.asarray(total, flat.dtype), batch).reshape(-1)
-    key = jax.random.PRNGKey(0) if key is None else key
-    w, v, rel, steps, ok = _fit_batch(radii, flat, totals, key, n=n, n_starts=n_starts, max_steps=max_steps,
-                                      rtol=rtol, atol=atol, constrained=total is not None)
+    keys = jax.random.split(jax.random.PRNGKey(0) if key is None else key, flat.shape[0])
+    options = dict(n=n, n_starts=n_starts, max_steps=max_steps, rtol=rtol, atol=atol, constrained=total is not None)
+    result = _fit_batch(radii, flat, totals, keys, seeded=init == "seed", **options)
+    if init == "seed":
+        # Random starts only where the seed's result is not good enough (NaN errors included).
+        # Concrete errors: fit just those profiles again. Traced ones (vmap, grad): every
+        # profile, selected alike, so the answer is the same either way.
+        traced = isinstance(result[2], jax.core.Tracer)
+        retry = np.arange(flat.shape[0]) if traced else np.flatnonzero(~(np.asarray(result[2]) <= retry_above))
+        if retry.size:
+            again = _fit_batch(radii[retry], flat[retry], totals[retry], keys[retry], seeded=False, **options)
+            take = (again[2] < result[2][retry]) & ~(result[2][retry] <= retry_above)
+            result = tuple(x.at[retry].set(jnp.where(take.reshape((-1,) + (1,) * (y.ndim - 1)), y, x[retry]))
+                           for x, y in zip(result, again))
+    w, v, rel, steps, ok = result
     return GaussianFit(w.reshape(batch + (n,)), v.reshape(batch + (n,)), rel.reshape(batch),
                        steps.reshape(batch), ok.reshape(batch))
 
