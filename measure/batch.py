@@ -108,10 +108,12 @@ def _fit_row(job, options) -> dict:
     return row
 
 
-# Workers run single-threaded XLA: a fit's dense transforms would otherwise take every core
-# in every worker, and N workers would fight over the same cores.
-_WORKER_ENV = {"XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false",
-               "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+# Worker processes keep BLAS/OpenMP to one thread each; XLA keeps its own thread pool. On this
+# 2-core machine one process already keeps both cores busy (XLA threads the fit's dense
+# transforms): forcing one XLA thread per worker made a fit 2.3x slower, and 2 workers of the
+# default threading were 0.78-0.84x one process (benchmarks/batch.py). Workers pay off with
+# more cores than one fit can use, and on a cluster.
+_WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 def _rows(jobs, args):
