@@ -151,12 +151,22 @@ def _check(medium: Medium):
 
 def _catmull_rom(position, n):
     """Indices (..., 4) and weights (..., 4) of a Catmull-Rom spline at fractional node
-    ``position`` on ``n`` uniform nodes (end nodes repeated)."""
+    ``position`` on ``n`` uniform nodes.
+
+    Beyond an end the missing neighbour is extrapolated linearly (P_-1 = 2 P_0 - P_1), not
+    repeated: a repeated end node halves the end tangent, which put the total reflectance at
+    eta 1.55 (between the last two nodes) 0.9 % low at albedo' 0.5 (against the cubic
+    through the nodes and against independent walks). With fewer than 3 nodes: linear."""
     base = jnp.clip(jnp.floor(position), 0, n - 2)
     t = jnp.clip(position - base, 0.0, 1.0)  # beyond the end nodes: the end value
     t2, t3 = t * t, t * t * t
-    weights = jnp.stack([(-t3 + 2 * t2 - t) / 2, (3 * t3 - 5 * t2 + 2) / 2, (-3 * t3 + 4 * t2 + t) / 2,
-                         (t3 - t2) / 2], axis=-1)
+    w0, w1 = (-t3 + 2 * t2 - t) / 2, (3 * t3 - 5 * t2 + 2) / 2
+    w2, w3 = (-3 * t3 + 4 * t2 + t) / 2, (t3 - t2) / 2
+    first, last = base == 0, base == n - 2
+    # Fold the phantom node's weight onto the two it is extrapolated from.
+    w1, w2, w0 = jnp.where(first, w1 + 2 * w0, w1), jnp.where(first, w2 - w0, w2), jnp.where(first, 0.0, w0)
+    w2, w1, w3 = jnp.where(last, w2 + 2 * w3, w2), jnp.where(last, w1 - w3, w1), jnp.where(last, 0.0, w3)
+    weights = jnp.stack([w0, w1, w2, w3], axis=-1)
     index = jnp.clip(base.astype(jnp.int32)[..., None] + jnp.arange(-1, 3), 0, n - 1)
     return index, weights
 

@@ -271,3 +271,18 @@ def test_low_albedo_profile_keeps_its_light_near_the_source(channel):
     radiance = np.stack([np.asarray(transport.radiance(medium, near, m)) for m in mu], axis=-1)
     np.testing.assert_allclose(2 * np.pi * radiance @ (w * mu), np.asarray(transport.profile(medium, near)),
                                rtol=0.05)
+
+
+def test_interpolation_is_exact_for_straight_lines_up_to_the_end_nodes():
+    """The spline in eta, a' and r reproduces a linear function on every interval, the two
+    end intervals included (with the end node repeated it did not: the end tangent was
+    halved, and the total at eta 1.55 read 0.9 % low at albedo' 0.5)."""
+    from jsss.transport import _catmull_rom
+
+    nodes = np.arange(7.0)
+    position = jnp.linspace(0.0, 6.0, 121)
+    index, weight = _catmull_rom(position, nodes.size)
+    line = 3.0 * nodes - 2.0
+    np.testing.assert_allclose((line[np.asarray(index)] * np.asarray(weight)).sum(-1), 3.0 * position - 2.0,
+                               atol=1e-12)
+    np.testing.assert_allclose(np.asarray(weight).sum(-1), 1.0, atol=1e-12)
