@@ -56,7 +56,8 @@ LIBLLVM = "/usr/lib/x86_64-linux-gnu/libLLVM-19.so"  # Debian's libllvm19; 15 an
 
 
 def _mitsuba(variant="auto"):
-    """Mitsuba with the LLVM variant where it runs (about 100x faster on CPU), else scalar."""
+    """Mitsuba with the LLVM variant where it runs, else scalar (on this 2-core machine they took
+    the same time: 0.70 / 0.77 s for 256 spp of the ketchup plane at 40 x 30, one channel)."""
     if variant in ("auto", "llvm_ad_rgb") and "DRJIT_LIBLLVM_PATH" not in os.environ and os.path.exists(LIBLLVM):
         os.environ["DRJIT_LIBLLVM_PATH"] = LIBLLVM
     try:
