@@ -195,10 +195,9 @@ def _read_raw(path, white_balance) -> ExrImage:
         raise PhotoError(f"{path}: not a readable raw file ({_why(error)})") from None
     pixels = rgb.astype(np.float64) / 65535.0
     if clipped.shape == pixels.shape[:2] and clipped.any():
-        grown = clipped.copy()  # the bilinear demosaic spreads a clipped sensor pixel to its 3 x 3 neighbours
-        for dy in (-1, 0, 1):
-            for dx in (-1, 0, 1):
-                grown |= np.roll(np.roll(clipped, dy, 0), dx, 1)
-        pixels[grown] = 1.0
+        from scipy.ndimage import binary_dilation
+
+        # The bilinear demosaic spreads a clipped sensor pixel to its 3 x 3 neighbours (not across the border).
+        pixels[binary_dilation(clipped, structure=np.ones((3, 3), bool))] = 1.0
     header = _header(_exposure(seconds, iso), {"jsss_white_balance": white_balance, "jsss_white_level": white_level})
     return ExrImage(pixels, ("R", "G", "B"), header, path)
