@@ -159,10 +159,10 @@ def _rows(jobs, args):
 
 
 def _resumed(jobs, out):
-    """Rows of ``out`` already fitted (status ok) and the jobs still to run (``--resume``)."""
+    """Rows of ``out`` already fitted (status ok), by file, and the jobs still to run (``--resume``)."""
     out = Path(out)
     if not out.is_file():
-        return [], jobs
+        return {}, jobs
     if out.suffix == ".parquet":
         try:
             import pyarrow.parquet as pq
@@ -173,7 +173,8 @@ def _resumed(jobs, out):
         with out.open(newline="") as handle:
             old = list(csv.DictReader(handle))
     done = {row["file"]: row for row in old if row.get("status") == "ok"}
-    return [done[str(job[0])] for job in jobs if str(job[0]) in done], [job for job in jobs if str(job[0]) not in done]
+    return {f: row for f, row in done.items() if f in {str(job[0]) for job in jobs}}, \
+        [job for job in jobs if str(job[0]) not in done]
 
 
 def _write_table(rows, out):
@@ -224,12 +225,12 @@ def batch(argv) -> int:
     if args.workers < 1:
         raise UsageError(f"--workers must be at least 1; got {args.workers}")
     jobs = _find_jobs(args.target, args.manifest)
-    kept, todo = _resumed(jobs, args.out) if args.resume else ([], jobs)
+    kept, todo = _resumed(jobs, args.out) if args.resume else ({}, jobs)
     if kept:
         print(f"resuming: {len(kept)} row(s) of {args.out} already fitted, {len(todo)} to fit", file=sys.stderr)
     _enable_x64()
     new = {row["file"]: row for row in _rows(todo, args)}
-    rows = [new.get(str(job[0])) or next(r for r in kept if r["file"] == str(job[0])) for job in jobs]
+    rows = [new.get(str(job[0])) or kept[str(job[0])] for job in jobs]
     _write_table(rows, args.out)
     failed = [r for r in rows if r["status"] != "ok"]
     print(f"{len(rows) - len(failed)} fitted, {len(failed)} failed; table written to {args.out}")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import json
 import os
 import sys
@@ -30,8 +31,10 @@ class UsageError(ValueError):
     """A problem with the command line or the input files, reported in one line."""
 
 
+@functools.lru_cache(maxsize=None)
 def _enable_x64():
-    """Console-script setup of JAX: float64 (fits need it) and the persistent compilation cache."""
+    """Console-script setup of JAX: float64 (fits need it) and the persistent compilation cache.
+    Once per process (a batch worker calls it for every image)."""
     import jax
 
     from jsss.cache import enable_compilation_cache
