@@ -172,12 +172,12 @@ def blur_schedule(variances, texel_size: float, *, max_ratio: float = 4.0) -> Bl
     return BlurSchedule(tuple(subs), start / v[0])
 
 
-def _targets(variances, schedule: BlurSchedule):
+def _targets(variances, substeps, first_variance_ratio):
     """Every sub-step's cumulative variance (geometric between outputs); traced-friendly."""
     targets, outputs = [], []
-    for i, m in enumerate(schedule.substeps):
+    for i, m in enumerate(substeps):
         hi = variances[i]
-        lo = hi * schedule.first_variance_ratio if i == 0 else variances[i - 1]
+        lo = hi * first_variance_ratio if i == 0 else variances[i - 1]
         for j in range(m):
             if i == 0:
                 targets.append(lo * (hi / lo) ** (j / max(m - 1, 1)) if m > 1 else hi)
@@ -197,7 +197,15 @@ def hierarchical_blur(texture, mask, stretch, variances, schedule: BlurSchedule,
     -------
     array, shape (n, H, W, C)
     """
-    targets, outputs = _targets(variances, schedule)
+    ratio = jnp.asarray(schedule.first_variance_ratio, texture.dtype)
+    return _chain(texture, mask, stretch, variances, ratio, substeps=schedule.substeps, taps=taps, wrap_u=wrap_u)
+
+
+@functools.partial(jax.jit, static_argnames=("substeps", "taps", "wrap_u"))
+def _chain(texture, mask, stretch, variances, first_variance_ratio, *, substeps, taps, wrap_u):
+    # Jitted on its own with the arrays as arguments: one compiled chain per texture size and
+    # schedule shape, reused by every frame and fit (a closure would bake the texture in).
+    targets, outputs = _targets(variances, substeps, first_variance_ratio)
     targets = jnp.stack([jnp.asarray(t, texture.dtype) for t in targets])
     steps = jnp.diff(targets, prepend=jnp.zeros((1,), texture.dtype))
 

@@ -21,6 +21,7 @@ examples:
   jsss-render examples/marble_sphere.toml -o marble.png --plan --timings
   jsss-render examples/ketchup_plane.toml --method image-space --samples 64
   jsss-render examples/*.toml -o renders/       (several scenes: -o is a directory)
+  jsss-render fit scene.toml photo.exr          (fit the material to a photo: jsss-render fit --help)
 
 The scene format (geometry, material, lights, camera, render) is described in the README,
 section "Scene files". A scene that fails is reported in one line; the others still render

@@ -1,0 +1,458 @@
+r"""Recover a homogeneous material from a linear photo of a scene whose geometry, camera and lights are known.
+
+Inverse rendering: the photo's pixels :math:`I_p` are fitted by :math:`g\,L_p(\theta)`, the
+renderer's linear radiance of the scene with the material's :math:`\sigma_a, \sigma_s'` per
+channel (:math:`\theta = \ln\sigma_a, \ln\sigma_s'`, so both stay positive) times an unknown
+exposure gain :math:`g` (photos have no absolute scale; ``gain=False`` holds it at 1 for a
+calibrated camera). The residuals :math:`(g L_p - I_p)/s_p` are whitened by the photo's noise
+:math:`s_p` (given, or ``noise`` times the pixel value) and minimised by optimistix's
+Levenberg-Marquardt in one jitted call.
+
+What is fixed during a fit is computed once: the rasterisation, the shadow maps, the texel
+geometry and, for texture-space diffusion, the blur itself. With the Gaussian variances held
+fixed the diffused texture is linear in the Gaussian weights (d'Eon 2007 sec. 5), so each
+variance's blurred irradiance is looked up in the camera once, and one model evaluation is
+the profile fit of the weights (:func:`jsss.render.profiles.render_profile`, differentiable
+in the medium), a weighted sum of those images and the per-pixel shading (single scattering
+included). The variances are planned for the starting material; if the fitted profile is not
+represented on them to the plan's accuracy, they are re-planned and the fit is repeated from
+there (at most ``replans`` times). The pixel methods (Lambert, normal filtering, image-space)
+are differentiated through their whole frame.
+
+What the image constrains is reported, not assumed: the covariance
+:math:`s^2 (J^T J)^{-1}` at the solution, with :math:`s^2 = \max(1, \chi^2/(m - n))` so that a
+model that cannot fit the photo (chi^2 per degree of freedom above 1) widens its errors
+rather than claiming noise-level precision, and a warning for each parameter whose relative
+standard error exceeds ``unconstrained`` (e.g. the mean free path of a uniformly lit object,
+or any spread under Lambert, which has none). The artist's parameters -- the total diffuse
+reflectance :math:`R_d` (the profile model's, per unit entering flux at normal incidence) and
+the mean free path :math:`1/\sigma_t'` -- are derived with their errors by the delta method.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from scipy import ndimage
+
+from jsss import dipole, transport
+from jsss.fresnel import exit_lobe
+from jsss.medium import Medium
+from jsss.render import plan_scene
+from jsss.render.image_space import camera_buffers
+from jsss.render.lighting import lookup
+from jsss.render.pixel_methods import pixel_radiance, prepare_pixels
+from jsss.render.profiles import render_profile
+from jsss.render.renderer import (
+    diffusion_pass,
+    exitance_pass,
+    irradiance_pass,
+    prepare,
+    render_params,
+)
+from jsss.render.scene import Material, Scene
+from jsss.render.shading import single_scattering, specular_radiance
+
+__all__ = ["RenderFit", "RenderFitError", "fit_pixels", "fit_render"]
+
+
+class RenderFitError(ValueError):
+    """The scene or the photo cannot be fitted; the message says which and why."""
+
+
+@dataclass(frozen=True, eq=False)
+class RenderFit:
+    """Result of :func:`fit_render`; per-channel arrays have shape (3,).
+
+    Attributes
+    ----------
+    medium : Medium
+        The estimate (eta is the scene's, held fixed).
+    sigma_a_err, sigma_s_prime_err : ndarray [1/mm]
+        One-sigma standard errors.
+    gain, gain_err : float
+        The exposure gain (photo / linear radiance) and its error (0 when not fitted).
+    reflectance, reflectance_err : ndarray
+        Total diffuse reflectance R_d of the profile model at the estimate, and its error.
+    mean_free_path, mean_free_path_err : ndarray [mm]
+        :math:`1/(\\sigma_a + \\sigma_s')` and its error.
+    covariance : ndarray (n, n)
+        Of the fitted parameters ``parameter_names`` (logarithms of sigma_a, sigma_s', gain).
+    chi2_reduced : float
+        chi^2 per degree of freedom of the whitened residuals (about 1 when model and noise fit).
+    steps : int; converged : bool
+        Solver steps (all outer rounds); the solver met its tolerances and every parameter is
+        finite.
+    n_pixels : int
+        Pixels used (the mask).
+    method, profile_model : str
+        How the photo was rendered during the fit.
+    image : ndarray (H, W, 3)
+        The fitted render, gain applied (0 off the object).
+    mask : ndarray (H, W) of bool
+        The pixels fitted.
+    warnings : tuple of str
+        Unconstrained parameters, a poor fit.
+    history : tuple of str
+        What each round re-planned, and why.
+    """
+
+    medium: Medium
+    sigma_a_err: np.ndarray
+    sigma_s_prime_err: np.ndarray
+    gain: float
+    gain_err: float
+    reflectance: np.ndarray
+    reflectance_err: np.ndarray
+    mean_free_path: np.ndarray
+    mean_free_path_err: np.ndarray
+    covariance: np.ndarray
+    parameter_names: tuple
+    chi2_reduced: float
+    steps: int
+    converged: bool
+    n_pixels: int
+    method: str
+    profile_model: str
+    image: np.ndarray
+    mask: np.ndarray
+    warnings: tuple = ()
+    history: tuple = ()
+
+    def as_dict(self) -> dict:
+        """JSON-ready summary (lists per channel)."""
+        listed = lambda a: [float(x) for x in np.broadcast_to(np.asarray(a, float), (3,))]
+        return {"sigma_a": listed(self.medium.sigma_a), "sigma_a_err": listed(self.sigma_a_err),
+                "sigma_s_prime": listed(self.medium.sigma_s_prime), "sigma_s_prime_err": listed(self.sigma_s_prime_err),
+                "eta": listed(self.medium.eta), "gain": float(self.gain), "gain_err": float(self.gain_err),
+                "reflectance": listed(self.reflectance), "reflectance_err": listed(self.reflectance_err),
+                "mean_free_path_mm": listed(self.mean_free_path), "mean_free_path_err_mm": listed(self.mean_free_path_err),
+                "chi2_reduced": float(self.chi2_reduced), "steps": int(self.steps), "converged": bool(self.converged),
+                "pixels": int(self.n_pixels), "method": self.method, "profile_model": self.profile_model,
+                "parameters": list(self.parameter_names), "covariance": np.asarray(self.covariance).tolist(),
+                "warnings": list(self.warnings), "history": list(self.history)}
+
+
+def fit_pixels(scene: Scene, photo, *, mask=None, saturation: float | None = None,
+               min_cos: float = 0.2) -> np.ndarray:
+    """The pixels a fit uses: the object as the scene's camera sees it, without its silhouette.
+
+    A pixel counts when the object covers it and its 8 neighbours (a silhouette pixel is
+    partly background, which no render of the object predicts), the surface faces the camera
+    with a cosine of at least ``min_cos`` (grazing pixels are the most sensitive to the
+    mesh's facets), no channel reaches ``saturation`` (if given), and ``mask`` (optional,
+    (H, W), true = use) allows it.
+
+    Raises
+    ------
+    RenderFitError
+        The photo is not (H, W, 3) at the camera's resolution, the mask does not match, or a
+        pixel to be fitted is NaN or infinite.
+    """
+    photo = np.asarray(photo)
+    cam = scene.camera
+    if photo.ndim != 3 or photo.shape[2] != 3:
+        raise RenderFitError(f"photo: expected an RGB image (H, W, 3); got shape {photo.shape}.")
+    if photo.shape[:2] != (cam.height, cam.width):
+        raise RenderFitError(f"photo: {photo.shape[1]} x {photo.shape[0]} pixels, but the scene's camera renders "
+                             f"{cam.width} x {cam.height}; set [camera] resolution to the photo's size.")
+    buffers = camera_buffers(scene.mesh, cam)
+    inside = ndimage.binary_erosion(buffers.mask, structure=np.ones((3, 3), bool), border_value=1)
+    facing = (buffers.normal * buffers.view).sum(-1) >= min_cos
+    use = inside & facing
+    if mask is not None:
+        mask = np.asarray(mask)
+        if mask.shape != use.shape:
+            raise RenderFitError(f"mask: {mask.shape[1]} x {mask.shape[0]} pixels, but the photo is "
+                                 f"{photo.shape[1]} x {photo.shape[0]}.")
+        use &= mask.astype(bool)
+    bad = use & ~np.isfinite(photo).all(-1)
+    if bad.any():
+        y, x = np.argwhere(bad)[0]
+        raise RenderFitError(f"photo: {int(bad.sum())} pixels on the object are NaN or infinite (the first at x = {x}, "
+                             f"y = {y}); repair them or exclude them with a mask.")
+    if saturation is not None:
+        use &= ~(photo >= saturation).any(-1)
+    return use
+
+
+def _artist(theta, profile_model, g, eta):
+    """R_d (3,) and mean free path (3,) [mm] of the log-coefficients ``theta[:6]``."""
+    medium = Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta)
+    total = (transport.total_reflectance(medium, g=g) if profile_model == "transport"
+             else dipole.total_reflectance(medium))
+    return jnp.concatenate([total, 1.0 / (medium.sigma_a + medium.sigma_s_prime)])
+
+
+class _TextureData(eqx.Module):
+    """Arrays of a texture-space fit: passed to the jitted solve, not captured as constants."""
+
+    basis: jax.Array  # (n, H, W, 3): pixel exitance of each variance with unit weights
+    variances: jax.Array
+    radii: jax.Array
+    exit_lobe: jax.Array  # (H, W, 3): radiance per unit diffusion exitance toward the camera
+    single_radiance: jax.Array  # (H, W, 3): single-scattered radiance and exitance of albedo 1
+    single_exitance: jax.Array
+    specular: jax.Array  # (H, W, 3): the surface reflection, fixed (it does not depend on the medium)
+    mask: jax.Array
+
+
+def _texture_data(scene: Scene, plan, dtype, blur_dtype=jnp.float32) -> _TextureData:
+    prep = prepare(scene, plan)
+    params = render_params(scene, plan, dtype=dtype)
+    # The blur is the one costly pass (seconds at 512^2); float32 keeps its images to 1e-7,
+    # far below any photo's noise, at half the time; the solve itself stays in ``dtype``.
+    low = render_params(scene, plan, dtype=blur_dtype)
+    blurred = diffusion_pass(low, prep, plan, irradiance_pass(low, prep))
+    n = len(plan.variances)
+    images = []
+    for i in range(n):  # exitance is linear in the weights: one image per variance, unit weight
+        term = eqx.tree_at(lambda p: (p.weights, p.variances), low,
+                           (jnp.ones((1, 3), blur_dtype), low.variances[i:i + 1]))
+        M = exitance_pass(term, prep, plan, blurred[i:i + 1])
+        images.append(lookup(M, prep.pixel_uv, prep.texels.mask).astype(dtype))
+    lights = tuple(g.astype(dtype) for g in prep.pixel_lights)
+    if plan.on("specular"):
+        spec = specular_radiance(prep.pixel_normal, prep.pixel_view, lights, params.radiant, params.eta,
+                                 roughness=scene.material.roughness, weight=scene.material.specular)
+    else:
+        spec = jnp.zeros(prep.pixel_mask.shape + (3,), dtype)
+    cos_view = jnp.asarray((prep.pixel_normal * prep.pixel_view).sum(-1), dtype)
+    # Jensen's single-scattering BRDF (HG g = 0 on the reduced coefficients) is the albedo
+    # sigma_s'/sigma_t' times a factor of the geometry and eta alone: evaluated once at albedo 1.
+    if plan.on("single scattering") and params.medium is not None:
+        unit = Medium(jnp.zeros(3, dtype), jnp.ones(3, dtype), params.eta)
+        single_radiance, single_exitance = single_scattering(unit, prep.pixel_normal, prep.pixel_view, lights,
+                                                             params.radiant)
+    else:
+        single_radiance = single_exitance = jnp.zeros(prep.pixel_mask.shape + (3,), dtype)
+    v = np.asarray(plan.variances, float)
+    return _TextureData(jnp.stack(images), jnp.asarray(v, dtype),
+                        jnp.asarray(np.geomspace(np.sqrt(v.min()) / 30, np.sqrt(v.max()) * 8, 600), dtype),
+                        exit_lobe(cos_view[..., None], params.eta), jnp.asarray(single_radiance, dtype),
+                        jnp.asarray(single_exitance, dtype), jnp.asarray(spec, dtype),
+                        jnp.asarray(prep.pixel_mask, dtype))
+
+
+def _texture_radiance(medium, data: _TextureData, profile_model: str, g: float):
+    """Linear radiance (H, W, 3) of a texture-space fit's scene for ``medium`` (variances fixed).
+
+    The same light as :func:`jsss.render.renderer.render_image` (tested): the diffusion
+    exitance less single scattering's share, spread by the exit lobe, plus the
+    single-scattered radiance, plus the surface reflection.
+    """
+    material = Material("fit", np.ones(3), medium=medium, profile_model=profile_model, g=g)
+    weights = render_profile(material, data.variances, radii=data.radii, medium=medium).weights
+    exitance = jnp.einsum("nc,nhwc->hwc", weights.astype(data.basis.dtype), data.basis)
+    albedo = medium.sigma_s_prime / (medium.sigma_a + medium.sigma_s_prime)
+    diffuse = jnp.maximum(exitance - albedo * data.single_exitance, 0.0) * data.exit_lobe
+    return (diffuse + albedo * data.single_radiance + data.specular) * data.mask[..., None]
+
+
+@functools.lru_cache(maxsize=16)
+def _texture_render(profile_model: str, g: float):
+    """One function object per configuration, so that the jitted solve is compiled once for it."""
+    return lambda medium, data: _texture_radiance(medium, data, profile_model, g)
+
+
+@functools.lru_cache(maxsize=16)
+def _residual_fn(render, fit_gain):
+    def residuals(theta, args):
+        data, photo, weight, eta = args
+        medium = Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta)
+        gain = jnp.exp(theta[6]) if fit_gain else 1.0
+        return ((gain * render(medium, data) - photo) * weight).reshape(-1)
+    return residuals
+
+
+@eqx.filter_jit
+def _solve(residuals, theta0, args, *, max_steps, rtol, atol):
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    sol = optx.least_squares(residuals, solver, theta0, args=args, max_steps=max_steps, throw=False)
+    jac = jax.jacfwd(residuals)(sol.value, args)
+    return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful, jac
+
+
+def _model_for(scene, plan, dtype, profile_model, g):
+    """The forward model ``render(medium, data)`` and its data for one plan."""
+    if plan.method == "texture-space":
+        return _texture_render(profile_model, g), _texture_data(scene, plan, dtype)
+    start = render_params(scene, plan, dtype=dtype)
+    prep = prepare_pixels(scene, plan.method, start.profile, normal_filter=plan.normal_filter)
+    material = scene.material
+
+    def render(medium, data):
+        p = render_params(scene, plan, medium=medium, dtype=dtype)
+        return pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples,
+                              specular=plan.on("specular"), roughness=material.roughness,
+                              specular_weight=material.specular, single_scattering=plan.on("single scattering"),
+                              medium=p.medium)
+    return render, ()
+
+
+def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=None, saturation: float | None = None,
+               method: str | None = None, accuracy: float = 0.001, profile_model: str | None = None,
+               g: float | None = None, init: Medium | None = None, gain: bool = True, specular: bool = True,
+               max_steps: int = 200, replans: int = 3, unconstrained: float = 0.5, dtype=jnp.float64,
+               progress=None) -> RenderFit:
+    """Fit the scene's homogeneous material to ``photo``, a linear HDR image from the scene's camera.
+
+    Parameters
+    ----------
+    scene : Scene
+        Geometry, camera, lights and the material whose sigma_a and sigma_s' are fitted (its
+        eta, roughness and specular weight are held; its coefficients are the starting guess
+        unless ``init`` is given).
+    photo : array (H, W, 3)
+        Linear radiance up to the gain, at the camera's resolution.
+    sigma : array broadcastable to photo, optional
+        Each pixel's standard error. Default: ``noise`` times the pixel value, floored at
+        ``noise`` times 1 % of the channel's 99th percentile (dark pixels).
+    mask, saturation
+        See :func:`fit_pixels`.
+    method : str, optional
+        Render method during the fit; default: the planner's choice for ``accuracy``.
+    accuracy : float
+        The planner's accuracy target for the fit's renders. Stricter than a display render's:
+        sigma_a of a high-albedo material lives in the profile's tail, and a render profile
+        0.5 % (RMS) off its exact form biased marble's sigma_a by 7 % (10 standard errors at
+        320 x 240) where 0.1 % left it within its errors.
+    profile_model, g : optional
+        ``"dipole"`` or ``"transport"`` (and its phase function's g); default: the scene's.
+    gain : bool
+        Fit an unknown exposure gain (default); False for a camera calibrated to radiance.
+    specular : bool
+        Render the surface reflection (held fixed); False when the photo holds subsurface light only.
+    max_steps, replans, unconstrained
+        Solver steps per round; re-plans of the variances; the relative standard error above
+        which a parameter is reported as not constrained by the image.
+    progress : callable, optional
+        Called with a line of text at the start of each phase (planning, the fixed passes,
+        the solve).
+
+    Returns
+    -------
+    RenderFit
+    """
+    material = scene.material
+    if material.kind != "medium":
+        raise RenderFitError(f"{scene.source}: fit_render fits a homogeneous medium; the scene's material is "
+                             f"{material.kind} (give sigma_a, sigma_s_prime and eta, or a named material).")
+    if not scene.lights:
+        raise RenderFitError(f"{scene.source}: the scene has no lights; a photo of an unlit object constrains no material.")
+    if not (noise > 0 and np.isfinite(noise)):
+        raise RenderFitError(f"noise must be a positive relative error; got {noise!r}.")
+    photo = np.asarray(photo, float)
+    use = fit_pixels(scene, photo, mask=mask, saturation=saturation)
+    n_params = 7 if gain else 6
+    if use.sum() * 3 < 10 * n_params:
+        raise RenderFitError(f"photo: only {int(use.sum())} pixels of the object can be fitted (needs at least "
+                             f"{int(np.ceil(10 * n_params / 3))}); is the camera looking at the object?")
+    if sigma is None:
+        floor = 0.01 * np.percentile(np.abs(photo[use]), 99, axis=0)
+        sigma = noise * np.maximum(np.abs(photo), np.maximum(floor, 1e-300))
+    sigma = np.broadcast_to(np.asarray(sigma, float), photo.shape)
+    if not (np.isfinite(sigma[use]).all() and (sigma[use] > 0).all()):
+        raise RenderFitError("sigma: every fitted pixel's standard error must be finite and > 0.")
+    profile_model = material.profile_model if profile_model is None else profile_model
+    g = material.g if g is None else float(g)
+    if profile_model not in ("dipole", "transport"):
+        raise RenderFitError(f"profile_model must be 'dipole' or 'transport'; got {profile_model!r}.")
+    if profile_model == "transport":
+        transport.check_supported(np.asarray(material.eta), g)
+    eta = jnp.asarray(material.eta, dtype)
+    start = material.medium if init is None else init
+    theta = jnp.concatenate([jnp.log(jnp.broadcast_to(jnp.asarray(start.sigma_a, dtype), (3,))),
+                             jnp.log(jnp.broadcast_to(jnp.asarray(start.sigma_s_prime, dtype), (3,))),
+                             jnp.zeros(1 if gain else 0, dtype)])
+    weight = jnp.asarray(np.where(use[..., None], 1.0 / sigma, 0.0), dtype)
+    target = jnp.asarray(np.where(use[..., None], photo, 0.0), dtype)
+    notes, history, steps = [], [], 0
+    say = progress if progress is not None else (lambda message: None)
+    def plan_for(theta):
+        medium = Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta)
+        fit_scene = dataclasses.replace(scene, material=dataclasses.replace(
+            material, medium=medium, profile_model=profile_model, g=g))
+        plan = plan_scene(fit_scene, accuracy=accuracy, method=method)
+        if method is None and plan.method == "texture-space":
+            # The calibration picks the cheapest knob of a frame's error; a fit needs the profile
+            # itself at ``accuracy`` (a 5-Gaussian profile 7 % off biased marble's sigma_a 3x).
+            plan = plan_scene(fit_scene, accuracy=accuracy, method="texture-space")
+        if not specular:
+            plan = plan.replace("specular", False, "the photo holds subsurface light only")
+        return fit_scene, plan
+
+    say(f"round 1: planning the fit's renders (accuracy {100 * accuracy:g} %)")
+    fit_scene, plan = plan_for(theta)
+    for round_ in range(replans + 1):
+        say(f"round {round_ + 1}: {plan.method}: the passes that stay fixed during the fit")
+        render, data = _model_for(fit_scene, plan, dtype, profile_model, g)
+        if gain and round_ == 0:  # the best gain for the start: a linear least-squares problem
+            model = np.asarray(render(fit_scene.material.medium, data))
+            w2 = np.asarray(weight) ** 2
+            best = (model * photo * w2).sum() / max((model**2 * w2).sum(), 1e-300)
+            theta = theta.at[6].set(jnp.log(jnp.asarray(max(best, 1e-300), dtype)))
+        say(f"round {round_ + 1}: Levenberg-Marquardt on {int(use.sum())} pixels (the first solve compiles)")
+        residuals = _residual_fn(render, gain)
+        args = (data, target, weight, eta)
+        theta, n_steps, solved, jac = _solve(residuals, theta, args, max_steps=max_steps,
+                                             rtol=1e-8, atol=1e-10)
+        steps += int(n_steps)
+        if round_ == replans:
+            break
+        # The plan was made for the start: made again for the estimate, is it the same? The
+        # passes it turns on (a translucent shadow map, single scattering) and the variances
+        # must be the estimate's own: on variances planned for another medium the truth fits
+        # worse than a biased estimate (marble from 3x off: chi^2/dof 1.18 at the truth,
+        # 0.99 at a sigma_a 18 % low, so the fit stopped there).
+        say(f"round {round_ + 1}: checking the plan against the estimate")
+        next_scene, next_plan = plan_for(theta)
+        changed = [d.name for d, e in zip(plan.decisions, next_plan.decisions) if d.on != e.on]
+        if next_plan.method != plan.method or next_plan.texture_size != plan.texture_size:
+            changed.append("method or texture size")
+        elif plan.method == "texture-space":
+            if len(next_plan.variances) != len(plan.variances):
+                changed.append("number of Gaussians")
+            elif (moved := np.max(np.abs(np.log(next_plan.variances / plan.variances)))) > 0.1:
+                changed.append(f"Gaussian variances (moved by up to {100 * moved:.0f} %)")
+        if not changed:
+            break
+        history.append(f"re-planned for the estimate after round {round_ + 1}: " + ", ".join(changed))
+        say(history[-1])
+        fit_scene, plan = next_scene, next_plan
+    r = np.asarray(residuals(theta, args))
+    m = int(use.sum()) * 3
+    chi2 = float(r @ r) / max(m - n_params, 1)
+    J = np.asarray(jac)
+    with np.errstate(all="ignore"):
+        covariance = np.linalg.pinv(J.T @ J) * max(1.0, chi2)
+    theta_np = np.asarray(theta)
+    rel = np.sqrt(np.clip(np.diag(covariance), 0, None))  # standard errors of logarithms = relative errors
+    A = np.asarray(jax.jacfwd(_artist)(theta[:6], profile_model, g, eta))
+    artist = np.asarray(_artist(theta[:6], profile_model, g, eta))
+    artist_err = np.sqrt(np.clip(np.diag(A @ covariance[:6, :6] @ A.T), 0, None))
+    sigma_a, sigma_s = np.exp(theta_np[:3]), np.exp(theta_np[3:6])
+    names = [f"ln sigma_a {c}" for c in "RGB"] + [f"ln sigma_s' {c}" for c in "RGB"] + (["ln gain"] if gain else [])
+    for name, e in zip(names, rel):
+        if not np.isfinite(e) or e > unconstrained:
+            notes.append(f"{name[3:]} is not constrained by the image (relative standard error "
+                         f"{'inf' if not np.isfinite(e) else f'{100 * e:.0f} %'}): its value is the solver's, not "
+                         "the photo's (a uniformly lit object hides the mean free path; Lambert has no spread)")
+    if chi2 > 4:
+        notes.append(f"poor fit: chi2/dof {chi2:.1f} (expected about 1); the errors are widened by its square root. "
+                     "Likely a wrong eta, geometry or light, a noise level set too low, or the profile model's bias")
+    final = Medium(jnp.asarray(sigma_a), jnp.asarray(sigma_s), material.eta)
+    image = np.asarray(render(Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta), data))
+    gain_value = float(np.exp(theta_np[6])) if gain else 1.0
+    return RenderFit(final, sigma_a * rel[:3], sigma_s * rel[3:6], gain_value,
+                     gain_value * float(rel[6]) if gain else 0.0, artist[:3], artist_err[:3], artist[3:],
+                     artist_err[3:], covariance, tuple(names), chi2, steps,
+                     bool(solved) and bool(np.all(np.isfinite(theta_np))), int(use.sum()), plan.method, profile_model,
+                     image * gain_value, use, tuple(notes), tuple(history))
