@@ -88,8 +88,8 @@ class RenderFit:
     chi2_reduced : float
         chi^2 per degree of freedom of the whitened residuals (about 1 when model and noise fit).
     steps : int; converged : bool
-        Solver steps (all outer rounds); the solver met its tolerances and every parameter is
-        finite.
+        Solver steps (all outer rounds); the solver met its tolerances, every parameter is
+        finite and has a finite standard error (the image constrains it).
     n_pixels : int
         Pixels used (the mask).
     method, profile_model : str
@@ -191,6 +191,12 @@ def _artist(theta, profile_model, g, eta):
     return jnp.concatenate([total, 1.0 / (medium.sigma_a + medium.sigma_s_prime)])
 
 
+def _profile_radii(variances) -> np.ndarray:
+    """Where the render profile is fitted [mm]: the narrowest Gaussian's core to the widest's tail."""
+    v = np.asarray(variances, float)
+    return np.geomspace(np.sqrt(v.min()) / 30, np.sqrt(v.max()) * 8, 600)
+
+
 class _TextureData(eqx.Module):
     """Arrays of a texture-space fit: passed to the jitted solve, not captured as constants."""
 
@@ -233,9 +239,8 @@ def _texture_data(scene: Scene, plan, dtype, blur_dtype=jnp.float32) -> _Texture
                                                              params.radiant)
     else:
         single_radiance = single_exitance = jnp.zeros(prep.pixel_mask.shape + (3,), dtype)
-    v = np.asarray(plan.variances, float)
-    return _TextureData(jnp.stack(images), jnp.asarray(v, dtype),
-                        jnp.asarray(np.geomspace(np.sqrt(v.min()) / 30, np.sqrt(v.max()) * 8, 600), dtype),
+    return _TextureData(jnp.stack(images), jnp.asarray(plan.variances, dtype),
+                        jnp.asarray(_profile_radii(plan.variances), dtype),
                         exit_lobe(cos_view[..., None], params.eta), jnp.asarray(single_radiance, dtype),
                         jnp.asarray(single_exitance, dtype), jnp.asarray(spec, dtype),
                         jnp.asarray(prep.pixel_mask, dtype))
@@ -262,14 +267,48 @@ def _texture_render(profile_model: str, g: float):
     return lambda medium, data: _texture_radiance(medium, data, profile_model, g)
 
 
+def _covariance(J, scale):
+    """``scale (J^T J)^-1`` on the directions the data see, and the directions they do not.
+
+    A direction along which the residuals do not change (an eigenvalue of J^T J below 1e-12
+    of the largest: Lambert's image is the same for sigma_a and sigma_s' scaled together)
+    has no finite variance. A pseudo-inverse would silently drop it and report small errors
+    for every parameter it involves, so it is returned as ``null`` (columns) instead.
+    """
+    H = J.T @ J
+    w, V = np.linalg.eigh(H)
+    seen = w > max(w.max(), 1e-300) * 1e-12
+    covariance = (V[:, seen] / w[seen]) @ V[:, seen].T * scale
+    return covariance, V[:, ~seen]
+
+
+def _standard_errors(gradients, covariance, null):
+    """Standard errors of quantities with ``gradients`` (rows) in the parameters: infinite for a
+    quantity that moves along a direction the data do not constrain."""
+    gradients = np.atleast_2d(gradients)
+    errors = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", gradients, covariance, gradients), 0, None))
+    if null.shape[1]:
+        leak = np.abs(gradients @ null).max(1) > 1e-6 * np.maximum(np.abs(gradients).max(1), 1e-300)
+        errors = np.where(leak, np.inf, errors)
+    return errors
+
+
 @functools.lru_cache(maxsize=16)
-def _residual_fn(render, fit_gain):
+def _residual_fn(render, fit_gain, block):
     def residuals(theta, args):
-        data, photo, weight, eta = args
+        data, photo, mask, inverse_sigma, eta = args
         medium = Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta)
         gain = jnp.exp(theta[6]) if fit_gain else 1.0
-        return ((gain * render(medium, data) - photo) * weight).reshape(-1)
+        return (_block_sums((gain * render(medium, data) - photo) * mask, block) * inverse_sigma).reshape(-1)
     return residuals
+
+
+def _block_sums(image, block: int):
+    """Sums over ``block`` x ``block`` tiles (H and W multiples of it); the image itself for 1."""
+    if block == 1:
+        return image
+    h, w = image.shape[0] // block, image.shape[1] // block
+    return image[:h * block, :w * block].reshape(h, block, w, block, -1).sum((1, 3))
 
 
 @eqx.filter_jit
@@ -287,9 +326,10 @@ def _model_for(scene, plan, dtype, profile_model, g):
     start = render_params(scene, plan, dtype=dtype)
     prep = prepare_pixels(scene, plan.method, start.profile, normal_filter=plan.normal_filter)
     material = scene.material
+    radii = _profile_radii(plan.variances)
 
     def render(medium, data):
-        p = render_params(scene, plan, medium=medium, dtype=dtype)
+        p = render_params(scene, plan, medium=medium, dtype=dtype, radii=radii)
         return pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples,
                               specular=plan.on("specular"), roughness=material.roughness,
                               specular_weight=material.specular, single_scattering=plan.on("single scattering"),
@@ -298,10 +338,10 @@ def _model_for(scene, plan, dtype, profile_model, g):
 
 
 def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=None, saturation: float | None = None,
-               method: str | None = None, accuracy: float = 0.001, profile_model: str | None = None,
+               method: str | None = None, accuracy: float = 0.001, samples: int | None = None, profile_model: str | None = None,
                g: float | None = None, init: Medium | None = None, gain: bool = True, specular: bool = True,
                max_steps: int = 200, replans: int = 3, unconstrained: float = 0.5, dtype=jnp.float64,
-               progress=None) -> RenderFit:
+               block: int = 1, progress=None) -> RenderFit:
     """Fit the scene's homogeneous material to ``photo``, a linear HDR image from the scene's camera.
 
     Parameters
@@ -319,6 +359,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         See :func:`fit_pixels`.
     method : str, optional
         Render method during the fit; default: the planner's choice for ``accuracy``.
+    samples : int, optional
+        Image-space samples per pixel (default: the planner's); the fit's frames use one
+        fixed seed, so the Monte Carlo pattern is part of the model, smooth in the medium.
     accuracy : float
         The planner's accuracy target for the fit's renders. Stricter than a display render's:
         sigma_a of a high-albedo material lives in the profile's tail, and a render profile
@@ -333,6 +376,10 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     max_steps, replans, unconstrained
         Solver steps per round; re-plans of the variances; the relative standard error above
         which a parameter is reported as not constrained by the image.
+    block : int
+        Compare photo and render summed over ``block`` x ``block`` pixel tiles (default 1:
+        per pixel). For heavy-tailed noise, such as a path tracer's fireflies, whose
+        per-pixel variance estimate would let a few pixels dominate.
     progress : callable, optional
         Called with a line of text at the start of each phase (planning, the fixed passes,
         the solve).
@@ -372,15 +419,22 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     theta = jnp.concatenate([jnp.log(jnp.broadcast_to(jnp.asarray(start.sigma_a, dtype), (3,))),
                              jnp.log(jnp.broadcast_to(jnp.asarray(start.sigma_s_prime, dtype), (3,))),
                              jnp.zeros(1 if gain else 0, dtype)])
-    weight = jnp.asarray(np.where(use[..., None], 1.0 / sigma, 0.0), dtype)
+    if not (isinstance(block, int) and block >= 1):
+        raise RenderFitError(f"block must be a positive integer; got {block!r}.")
+    mask = use[..., None].astype(float)
+    block_variance = np.asarray(_block_sums(np.where(use[..., None], sigma, 0.0) ** 2, block))
+    block_used = np.asarray(_block_sums(mask, block)) > 0
+    inverse_sigma = jnp.asarray(np.where(block_used, 1.0 / np.sqrt(np.where(block_used, block_variance, 1.0)), 0.0),
+                                dtype)
     target = jnp.asarray(np.where(use[..., None], photo, 0.0), dtype)
+    mask = jnp.asarray(mask, dtype)
     notes, history, steps = [], [], 0
     say = progress if progress is not None else (lambda message: None)
     def plan_for(theta):
         medium = Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta)
         fit_scene = dataclasses.replace(scene, material=dataclasses.replace(
             material, medium=medium, profile_model=profile_model, g=g))
-        plan = plan_scene(fit_scene, accuracy=accuracy, method=method)
+        plan = plan_scene(fit_scene, accuracy=accuracy, method=method, samples=samples)
         if method is None and plan.method == "texture-space":
             # The calibration picks the cheapest knob of a frame's error; a fit needs the profile
             # itself at ``accuracy`` (a 5-Gaussian profile 7 % off biased marble's sigma_a 3x).
@@ -396,12 +450,14 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         render, data = _model_for(fit_scene, plan, dtype, profile_model, g)
         if gain and round_ == 0:  # the best gain for the start: a linear least-squares problem
             model = np.asarray(render(fit_scene.material.medium, data))
-            w2 = np.asarray(weight) ** 2
-            best = (model * photo * w2).sum() / max((model**2 * w2).sum(), 1e-300)
+            w2 = np.asarray(inverse_sigma) ** 2
+            model_b = np.asarray(_block_sums(model * np.asarray(mask), block))
+            photo_b = np.asarray(_block_sums(np.asarray(target), block))
+            best = (model_b * photo_b * w2).sum() / max((model_b**2 * w2).sum(), 1e-300)
             theta = theta.at[6].set(jnp.log(jnp.asarray(max(best, 1e-300), dtype)))
         say(f"round {round_ + 1}: Levenberg-Marquardt on {int(use.sum())} pixels (the first solve compiles)")
-        residuals = _residual_fn(render, gain)
-        args = (data, target, weight, eta)
+        residuals = _residual_fn(render, gain, block)
+        args = (data, target, mask, inverse_sigma, eta)
         theta, n_steps, solved, jac = _solve(residuals, theta, args, max_steps=max_steps,
                                              rtol=1e-8, atol=1e-10)
         steps += int(n_steps)
@@ -428,23 +484,23 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         say(history[-1])
         fit_scene, plan = next_scene, next_plan
     r = np.asarray(residuals(theta, args))
-    m = int(use.sum()) * 3
+    m = int(block_used.sum()) * 3  # used tiles times channels
     chi2 = float(r @ r) / max(m - n_params, 1)
     J = np.asarray(jac)
-    with np.errstate(all="ignore"):
-        covariance = np.linalg.pinv(J.T @ J) * max(1.0, chi2)
+    covariance, null = _covariance(J, max(1.0, chi2))
     theta_np = np.asarray(theta)
-    rel = np.sqrt(np.clip(np.diag(covariance), 0, None))  # standard errors of logarithms = relative errors
+    rel = _standard_errors(np.eye(len(theta_np)), covariance, null)  # errors of logarithms = relative errors
     A = np.asarray(jax.jacfwd(_artist)(theta[:6], profile_model, g, eta))
     artist = np.asarray(_artist(theta[:6], profile_model, g, eta))
-    artist_err = np.sqrt(np.clip(np.diag(A @ covariance[:6, :6] @ A.T), 0, None))
+    artist_err = _standard_errors(np.pad(A, ((0, 0), (0, len(theta_np) - 6))), covariance, null)
     sigma_a, sigma_s = np.exp(theta_np[:3]), np.exp(theta_np[3:6])
     names = [f"ln sigma_a {c}" for c in "RGB"] + [f"ln sigma_s' {c}" for c in "RGB"] + (["ln gain"] if gain else [])
-    for name, e in zip(names, rel):
-        if not np.isfinite(e) or e > unconstrained:
-            notes.append(f"{name[3:]} is not constrained by the image (relative standard error "
-                         f"{'inf' if not np.isfinite(e) else f'{100 * e:.0f} %'}): its value is the solver's, not "
-                         "the photo's (a uniformly lit object hides the mean free path; Lambert has no spread)")
+    loose = [f"{name[3:]} ({'inf' if not np.isfinite(e) else f'{100 * e:.0f} %'})"
+             for name, e in zip(names, rel) if not e <= unconstrained]
+    if loose:
+        notes.append("not constrained by the image (relative standard error): " + ", ".join(loose)
+                     + "; their values are the solver's, not the photo's (a uniformly lit object hides the mean "
+                       "free path; Lambert has no spread at all)")
     if chi2 > 4:
         notes.append(f"poor fit: chi2/dof {chi2:.1f} (expected about 1); the errors are widened by its square root. "
                      "Likely a wrong eta, geometry or light, a noise level set too low, or the profile model's bias")
@@ -454,5 +510,6 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     return RenderFit(final, sigma_a * rel[:3], sigma_s * rel[3:6], gain_value,
                      gain_value * float(rel[6]) if gain else 0.0, artist[:3], artist_err[:3], artist[3:],
                      artist_err[3:], covariance, tuple(names), chi2, steps,
-                     bool(solved) and bool(np.all(np.isfinite(theta_np))), int(use.sum()), plan.method, profile_model,
+                     bool(solved) and bool(np.all(np.isfinite(theta_np))) and bool(np.all(np.isfinite(rel))),
+                     int(use.sum()), plan.method, profile_model,
                      image * gain_value, use, tuple(notes), tuple(history))

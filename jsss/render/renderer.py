@@ -57,10 +57,12 @@ class RenderParams(eqx.Module):
     medium: Medium | None = None
 
 
-def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32) -> RenderParams:
+def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, radii=None) -> RenderParams:
     """Parameters of ``scene`` under ``plan``; ``medium`` replaces a homogeneous material's medium
-    (pass a traced one to differentiate with respect to sigma_a, sigma_s' or eta)."""
-    gs = render_profile(scene.material, plan.variances, medium=medium)
+    (pass a traced one to differentiate with respect to sigma_a, sigma_s' or eta). ``radii``
+    [mm], where the render profile is fitted (default: from the scene's own profile), must
+    be given when this runs under ``jit``."""
+    gs = render_profile(scene.material, plan.variances, medium=medium, radii=radii)
     radiant = np.array([np.asarray(l.color) * l.intensity for l in scene.lights])
     eta = scene.material.eta if medium is None else medium.eta
     eta = jnp.broadcast_to(jnp.asarray(eta), (3,))

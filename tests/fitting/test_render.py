@@ -1,0 +1,154 @@
+"""Inverse rendering: a material from a photo of a known scene (fitting.render, jsss-render fit).
+
+The photos here are jsss's own renders with noise, so these tests check the fit (recovery
+within the stated errors, identifiability, bad input), not the renderer's physics: that the
+renders agree with a path tracer is benchmarks/transport_truth.py's job, and
+benchmarks/inverse_rendering.py fits path-traced photos.
+"""
+
+import dataclasses
+import json
+import subprocess
+import sys
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fitting.render import RenderFitError, _texture_data, _texture_radiance, fit_render, fit_pixels
+from jsss import dipole
+from jsss.exr import write_exr
+from jsss.medium import Medium
+from jsss.render import parse_scene, plan_scene, render
+
+SCENE = """
+[geometry]
+shape = "sphere"
+radius = 20.0
+
+[material]
+sigma_a = [0.0021, 0.0041, 0.0071]
+sigma_s_prime = [2.19, 2.62, 3.00]
+eta = 1.5
+roughness = 0.25
+
+[[lights]]
+type = "directional"
+direction = [0.6, 0.8, -0.5]
+intensity = 1.0
+
+[camera]
+position = [0.0, -110.0, 30.0]
+look_at = [0.0, 0.0, 0.0]
+fov = 28
+resolution = [64, 48]
+
+[render]
+texture_size = 128
+"""
+
+
+@pytest.fixture(scope="module")
+def scene():
+    import tomllib
+
+    return parse_scene(tomllib.loads(SCENE), source="sphere.toml")
+
+
+def _photo(scene, method="texture-space", gain=2.5, noise=0.01, seed=0):
+    plan = plan_scene(scene, accuracy=0.001, method=method)
+    clean = render(scene, plan, dtype=jnp.float64).radiance
+    rng = np.random.default_rng(seed)
+    return gain * clean * (1 + noise * rng.standard_normal(clean.shape))
+
+
+def _start(scene):
+    m = scene.material.medium
+    return Medium(2 * np.asarray(m.sigma_a), np.asarray(m.sigma_s_prime) / 1.5, m.eta)
+
+
+def test_the_fits_fixed_pass_model_is_the_renderers_frame(scene):
+    """Consistency, not truth: the fit's precomputed texture-space model (blur basis, single
+    scattering linear in the albedo) reproduces the renderer's own frame."""
+    plan = plan_scene(scene, accuracy=0.001, method="texture-space")
+    frame = render(scene, plan, dtype=jnp.float64).radiance
+    model = np.asarray(_texture_radiance(scene.material.medium, _texture_data(scene, plan, jnp.float64), "dipole", 0.0))
+    use = fit_pixels(scene, frame)
+    assert np.max(np.abs(model[use] / frame[use] - 1)) < 5e-5
+
+
+def test_recovers_the_material_and_gain_within_the_stated_errors(scene):
+    """A 1 %-noise render, fitted from 2x the absorption and 2/3 of the scattering: the truth
+    within 3 stated standard errors, chi^2 per degree of freedom about 1."""
+    photo = _photo(scene)
+    fit = fit_render(scene, photo, init=_start(scene))
+    truth = scene.material.medium
+    z_a = (np.asarray(fit.medium.sigma_a) - np.asarray(truth.sigma_a)) / fit.sigma_a_err
+    z_s = (np.asarray(fit.medium.sigma_s_prime) - np.asarray(truth.sigma_s_prime)) / fit.sigma_s_prime_err
+    assert fit.converged and fit.method == "texture-space"
+    assert np.all(np.abs(z_a) < 3) and np.all(np.abs(z_s) < 3), (z_a, z_s)
+    assert abs(fit.gain - 2.5) < 3 * fit.gain_err
+    assert 0.8 < fit.chi2_reduced < 1.25
+    assert np.all(fit.sigma_a_err / np.asarray(truth.sigma_a) < 0.2)  # the image does constrain it
+    assert not fit.warnings
+
+
+@pytest.mark.parametrize("method", ["lambert", "normal filtering"])
+def test_methods_without_spread_report_the_mean_free_path_unconstrained(scene, method):
+    """Lambert, and normal filtering with its filter fixed during the fit, make an image that
+    depends on the albedo alone (R_d and single scattering), not on the scale of sigma_t: the
+    fit must say so (infinite errors, a warning, not converged) instead of printing a
+    confident value, while the albedo it does see is recovered."""
+    photo = _photo(scene, method=method, noise=0.003)
+    fit = fit_render(scene, photo, method=method, init=_start(scene))
+    assert any("not constrained" in w for w in fit.warnings) and not fit.converged
+    assert np.all(fit.mean_free_path_err / fit.mean_free_path > 0.5)
+    truth_rd = np.asarray(dipole.total_reflectance(scene.material.medium))
+    assert np.all(np.isfinite(fit.reflectance_err))
+    assert np.all(np.abs(fit.reflectance - truth_rd) < 3 * fit.reflectance_err + 1e-3)
+
+
+@pytest.mark.parametrize("case, message", [
+    ("size", "32 x 24 pixels, but the scene's camera renders 64 x 48"),
+    ("nan", "pixels on the object are NaN or infinite"),
+    ("lights", "the scene has no lights"),
+    ("channels", "expected an RGB image"),
+])
+def test_bad_input_is_one_clear_error(scene, case, message):
+    photo = np.ones((48, 64, 3))
+    if case == "size":
+        photo = np.ones((24, 32, 3))
+    elif case == "nan":
+        photo[24, 32, 1] = np.nan
+    elif case == "lights":
+        scene = dataclasses.replace(scene, lights=())
+    elif case == "channels":
+        photo = np.ones((48, 64))
+    with pytest.raises(RenderFitError, match=message):
+        fit_render(scene, photo)
+
+
+def test_fit_command_writes_parameters_a_renderable_scene_and_a_figure(scene, tmp_path):
+    from jsss.render import load_scene
+
+    (tmp_path / "sphere.toml").write_text(SCENE.replace("sigma_a = [0.0021, 0.0041, 0.0071]",
+                                                        "sigma_a = [0.005, 0.005, 0.005]"))
+    write_exr(tmp_path / "photo.exr", _photo(scene))
+    run = lambda *extra: subprocess.run(  # noqa: E731
+        [sys.executable, "-m", "measure.render_fit", "fit", str(tmp_path / "sphere.toml"), *extra],
+        capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=900, cwd=tmp_path)
+    out = run(str(tmp_path / "photo.exr"), "--json", "-o", str(tmp_path / "fit"))
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout)
+    for key in ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err"):
+        assert len(result[key]) == 3 and all(np.isfinite(result[key]))
+    truth = scene.material.medium
+    assert np.all(np.abs(np.array(result["sigma_s_prime"]) - np.asarray(truth.sigma_s_prime))
+                  < 3 * np.array(result["sigma_s_prime_err"]))
+    fitted = load_scene(tmp_path / "fit" / "photo.fit.toml")
+    assert np.allclose(np.asarray(fitted.material.medium.sigma_a), result["sigma_a"], rtol=1e-6)
+    assert (tmp_path / "fit" / "photo.fit.png").stat().st_size > 10_000
+    write_exr(tmp_path / "small.exr", np.ones((24, 32, 3)))
+    bad = run(str(tmp_path / "small.exr"))
+    assert bad.returncode == 2
+    assert bad.stderr.strip().count("\n") == 0 and "32 x 24 pixels" in bad.stderr
