@@ -45,6 +45,7 @@ from scipy import ndimage
 from jsss import dipole, transport
 from jsss.fresnel import exit_lobe
 from jsss.medium import Medium
+from jsss.numerics import warn_if_low_precision
 from jsss.render import plan_scene
 from jsss.render.image_space import camera_buffers
 from jsss.render.lighting import lookup
@@ -415,9 +416,12 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     if profile_model == "transport":
         transport.check_supported(np.asarray(material.eta), g)
     eta = jnp.asarray(material.eta, dtype)
+    warn_if_low_precision(eta, what="fit_render", needs="errors below the noise of a 1 %-noise photo (float64 fits)")
     start = material.medium if init is None else init
-    theta = jnp.concatenate([jnp.log(jnp.broadcast_to(jnp.asarray(start.sigma_a, dtype), (3,))),
-                             jnp.log(jnp.broadcast_to(jnp.asarray(start.sigma_s_prime, dtype), (3,))),
+    scattering = jnp.broadcast_to(jnp.asarray(start.sigma_s_prime, dtype), (3,))
+    absorption = jnp.maximum(jnp.broadcast_to(jnp.asarray(start.sigma_a, dtype), (3,)), 1e-6 * scattering)
+    theta = jnp.concatenate([jnp.log(absorption),  # a start without absorption: its logarithm must be finite
+                             jnp.log(scattering),
                              jnp.zeros(1 if gain else 0, dtype)])
     if not (isinstance(block, int) and block >= 1):
         raise RenderFitError(f"block must be a positive integer; got {block!r}.")
