@@ -184,9 +184,14 @@ def fit_pixels(scene: Scene, photo, *, mask=None, saturation: float | None = Non
     return use
 
 
+def _medium(theta, eta) -> Medium:
+    """The medium of the log-coefficients ``theta[:6]`` (ln sigma_a, ln sigma_s')."""
+    return Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta)
+
+
 def _artist(theta, profile_model, g, eta):
     """R_d (3,) and mean free path (3,) [mm] of the log-coefficients ``theta[:6]``."""
-    medium = Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta)
+    medium = _medium(theta, eta)
     total = (transport.total_reflectance(medium, g=g) if profile_model == "transport"
              else dipole.total_reflectance(medium))
     return jnp.concatenate([total, 1.0 / (medium.sigma_a + medium.sigma_s_prime)])
@@ -298,7 +303,7 @@ def _standard_errors(gradients, covariance, null):
 def _residual_fn(render, fit_gain, block):
     def residuals(theta, args):
         data, photo, mask, inverse_sigma, eta = args
-        medium = Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta)
+        medium = _medium(theta, eta)
         gain = jnp.exp(theta[6]) if fit_gain else 1.0
         return (_block_sums((gain * render(medium, data) - photo) * mask, block) * inverse_sigma).reshape(-1)
     return residuals
@@ -435,7 +440,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     notes, history, steps = [], [], 0
     say = progress if progress is not None else (lambda message: None)
     def plan_for(theta):
-        medium = Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta)
+        medium = _medium(theta, eta)
         fit_scene = dataclasses.replace(scene, material=dataclasses.replace(
             material, medium=medium, profile_model=profile_model, g=g))
         plan = plan_scene(fit_scene, accuracy=accuracy, method=method, samples=samples)
@@ -509,7 +514,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         notes.append(f"poor fit: chi2/dof {chi2:.1f} (expected about 1); the errors are widened by its square root. "
                      "Likely a wrong eta, geometry or light, a noise level set too low, or the profile model's bias")
     final = Medium(jnp.asarray(sigma_a), jnp.asarray(sigma_s), material.eta)
-    image = np.asarray(render(Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta), data))
+    image = np.asarray(render(_medium(theta, eta), data))
     gain_value = float(np.exp(theta_np[6])) if gain else 1.0
     return RenderFit(final, sigma_a * rel[:3], sigma_s * rel[3:6], gain_value,
                      gain_value * float(rel[6]) if gain else 0.0, artist[:3], artist_err[:3], artist[3:],

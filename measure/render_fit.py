@@ -144,20 +144,15 @@ def _figure(photo, result, sigma_noise, path):
     fig.colorbar(im, ax=axes[2], shrink=0.85)
     for ax in axes:
         ax.set_axis_off()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, format="png")  # the path may be a temporary name without a suffix
     plt.close(fig)
-
-
-def _write_atomically(path: Path, text: str):
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
 
 
 def _run(args, say) -> int:
     from fitting.render import fit_render
     from jsss.render import load_scene
 
+    from .cli import _write_atomically, _write_text
     from .photo import read_image
 
     say(f"{args.scene}: loading the scene and the photo")
@@ -187,9 +182,9 @@ def _run(args, say) -> int:
                                                          roughness=material.roughness, specular=material.specular,
                                                          g=g)}
     for path, text in files.items():
-        _write_atomically(path, text)
+        _write_text(path, text)
     figure = out / f"{stem}.fit.png"
-    _figure(photo, result, args.noise, figure)
+    _write_atomically(figure, lambda tmp: _figure(photo, result, args.noise, tmp))
     for warning in result.warnings:
         print(f"{PROG}: warning: {warning}", file=sys.stderr)
     if args.json:
