@@ -47,21 +47,33 @@ def main():
     marble = jensen2001("marble")
 
     size, pixel = 512, 0.025
-    synthetic = synthesize(marble, size=size, pixel_mm=pixel, photons_per_unit=1e5, grid=grid)
+    print(f"measurement pipeline, {jax.devices()[0].platform} x{os.cpu_count()} cores, load "
+          f"{os.getloadavg()[0]:.1f}, {today}")
+    print("one 512x512 RGB camera image of marble (transport tables; extraction + fit, after warm-up, median of 5);")
+    print("baseline in the same run: 7 Levenberg-Marquardt starts per channel (init='multistart', before 2026-12-01)\n")
+    print("| model | start | ms | x baseline | sigma_a worst error | sigma_s' worst error |")
+    print("|---|---|---:|---:|---:|---:|")
+    synthetic = synthesize(marble, size=size, pixel_mm=pixel, photons_per_unit=1e5, grid=grid, model="transport")
+    for model in ("transport", "dipole"):
+        base = None
+        for init in ("multistart", "scan"):
+            def one():
+                return fit_measurement(synthetic.measurement, synthetic.reference, pixel, 1.5, dark=synthetic.dark,
+                                       grid=grid, model=model, fit_options={"init": init})
 
-    def one():
-        return fit_measurement(synthetic.measurement, synthetic.reference, pixel, 1.5, dark=synthetic.dark, grid=grid)
-
-    t_one = median_seconds(one, repeats=5)
-    batch = [synthesize(marble, size=size, pixel_mm=pixel, photons_per_unit=1e5, seed=s, grid=grid)
+            seconds = median_seconds(one, repeats=5)
+            base = base or seconds
+            ea, es = worst_errors(one(), marble)
+            print(f"| {model} | {init} | {1e3 * seconds:.0f} | {base / seconds:.1f} | {ea:.2%} | {es:.2%} |")
+    batch = [synthesize(marble, size=size, pixel_mm=pixel, photons_per_unit=1e5, seed=s, grid=grid, model="transport")
              for s in range(args.batch)]
     start = time.perf_counter()
-    errors = [worst_errors(fit_measurement(b.measurement, b.reference, pixel, 1.5, dark=b.dark, grid=grid), marble)
+    errors = [worst_errors(fit_measurement(b.measurement, b.reference, pixel, 1.5, dark=b.dark, grid=grid,
+                                           model="transport"), marble)
               for b in batch]
     t_batch = time.perf_counter() - start
-    print(f"measurement pipeline, {jax.devices()[0].platform}, {today}")
-    print(f"one 512x512 RGB measurement (extraction + fit, after warm-up): median {1e3 * t_one:.0f} ms")
-    print(f"batch of {args.batch}: {t_batch:.1f} s ({1e3 * t_batch / args.batch:.0f} ms each); worst rel. error "
+    print(f"\nbatch of {args.batch} (512^2, transport, in one process): {t_batch:.1f} s "
+          f"({1e3 * t_batch / args.batch:.0f} ms each); worst rel. error "
           f"sigma_a {max(e[0] for e in errors):.2%}, sigma_s' {max(e[1] for e in errors):.2%}\n")
 
     print(f"accuracy vs noise (256 px of 0.05 mm; worst channel; median of 3 seeds), {today}")

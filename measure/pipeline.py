@@ -13,8 +13,8 @@ import numpy as np
 from fitting.medium import MediumFit, fit_medium
 
 from .checks import check_measurement, fit_quality
-from .profile import (Calibrated, RadialProfile, beam_center, beam_sigma, beam_window_mm, calibrate, check_image,
-                      radial_profile)
+from .profile import (Calibrated, RadialProfile, beam_center, beam_sigma, beam_window_mm, calibrate, channel_sums,
+                      check_image, radial_profile)
 
 __all__ = ["MeasurementFit", "fit_measurement"]
 
@@ -63,23 +63,27 @@ class MeasurementFit:
         }
 
 
-def _sum_variance(image, center, pixel_mm):
-    """Variance of the sum of an image, from the per-pixel scatter in thin annuli.
+def _sum_variance(images, center, pixel_mm):
+    """Variance of the sum of each image (a list of ``(H, W, C)``, one centre), from the
+    per-pixel scatter in thin annuli.
 
     Shot noise grows with the signal, so a border estimate of the read noise alone would
     understate the error of the total; the annular scatter (about a straight line in r)
-    measures both, wherever the light is.
+    measures both, wherever the light is. The images are binned together as one image of
+    their stacked channels (each channel keeps its own noise model), sharing the rings.
     """
-    profile = radial_profile(image, center, pixel_mm, n_bins=96, r_min_mm=pixel_mm / 2,
-                             r_max_mm=np.hypot(*image.shape[:2]) * pixel_mm)
+    stacked = np.concatenate(images, axis=-1)
+    profile = radial_profile(stacked, center, pixel_mm, n_bins=96, r_min_mm=pixel_mm / 2,
+                             r_max_mm=np.hypot(*stacked.shape[:2]) * pixel_mm)
     per_pixel = profile.stderr**2 * profile.count[:, None]
-    return np.sum(per_pixel * profile.count[:, None], axis=0)
+    variance = np.sum(per_pixel * profile.count[:, None], axis=0)
+    return np.split(variance, np.cumsum([image.shape[-1] for image in images])[:-1])
 
 
 def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, reference_reflectance: float = 0.99,
                     model: str = "dipole", g: float = 0.0, view_angle_deg: float | None = 0.0,
                     channels=("R", "G", "B"), n_bins: int = 48, r_min_mm: float | None = None,
-                    grid=None) -> MeasurementFit:
+                    grid=None, fit_options: dict | None = None) -> MeasurementFit:
     """Calibrate, bin and fit one measurement (images ``(H, W, C)``).
 
     The beam centre and width come from the reference. The fit models the beam, and bins
@@ -87,7 +91,8 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     image is dominated by the sample rather than by the beam's core. ``grid`` is the
     Hankel grid of the model (build one with :func:`jsss.hankel.hankel_grid` and pass it
     when fitting many measurements). ``model`` and ``g`` choose the profile model (see
-    :func:`fitting.medium.fit_medium`).
+    :func:`fitting.medium.fit_medium`); ``fit_options`` passes its solver options (``init``,
+    ``n_starts``, ``max_steps``, ``rtol``, ``atol``).
 
     The image contract (README): a pixel is proportional to the radiance toward the camera,
     which looks at the sample ``view_angle_deg`` from its normal (default 0, straight down;
@@ -108,13 +113,14 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     center = beam_center(ref)
     window = beam_window_mm(ref, pixel_mm)
     sigma = beam_sigma(ref, center, pixel_mm, radius_mm=window)
-    meas_sum, meas_var = meas.sum(axis=(0, 1)), _sum_variance(meas, center, pixel_mm)
+    meas_var, ref_var = _sum_variance([meas, ref], center, pixel_mm)
+    meas_sum = channel_sums(meas)
     check_measurement(meas, ref, center=center, pixel_mm=pixel_mm, window_mm=window, beam_sigma_mm=sigma,
                       signal=meas_sum, signal_stderr=np.sqrt(meas_var), channels=channels)
     # The measurement's own noise enters the total; the reference's sum scales the profile
     # and the total alike, so its error is passed separately as a shared scale error.
     meas_relative_var = meas_var / meas_sum**2
-    scale_stderr = np.sqrt(_sum_variance(ref, center, pixel_mm)) / ref.sum(axis=(0, 1))
+    scale_stderr = np.sqrt(ref_var) / channel_sums(ref)
     total_stderr = np.abs(calibrated.total_reflectance) * np.sqrt(meas_relative_var)
     r_min = r_min_mm or max(2 * pixel_mm, 2 * sigma)
     profile = radial_profile(calibrated.reflectance, center, pixel_mm, n_bins=n_bins, r_min_mm=r_min)
@@ -140,5 +146,5 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
                      total_reflectance=calibrated.total_reflectance, total_stderr=total_stderr,
                      field_radii=field, pixel_area=pixel_mm**2, scale_stderr=scale_stderr, beam_sigma=sigma,
                      model=model, g=g, view_cos=None if view_angle_deg is None else np.cos(np.radians(view_angle_deg)),
-                     grid=grid)
+                     grid=grid, **(fit_options or {}))
     return MeasurementFit(fit, profile, calibrated, center, sigma, tuple(channels), model, float(g), view_angle_deg)

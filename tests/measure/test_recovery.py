@@ -140,9 +140,49 @@ def test_a_parameter_that_ran_to_zero_is_not_converged(monkeypatch):
 
     medium = jensen2001("marble")
     synthetic = synthesize(medium, size=256, photons_per_unit=1e5, seed=1, model="transport")
-    monkeypatch.setattr(pipeline, "fit_medium", functools.partial(fitting.medium.fit_medium, n_starts=2))
+    monkeypatch.setattr(pipeline, "fit_medium", functools.partial(fitting.medium.fit_medium, init="multistart",
+                                                                 n_starts=2))
     table = pipeline.fit_measurement(synthetic.measurement, synthetic.reference, 0.05, 1.5, dark=synthetic.dark,
                                      model="transport").table()
     ran_away = np.asarray(table["sigma_a"]) < 1e-3 * np.asarray(medium.sigma_a)
     assert ran_away.any()  # the situation this test is about
     assert not any(np.asarray(table["converged"])[ran_away])
+
+
+def test_annulus_scatter_from_sums_equals_the_residuals_about_each_bins_line():
+    """radial_profile takes each annulus's scatter about its straight line in r from sums
+    (sum v^2 - n m^2 - b^2 sum dr^2); here the line is fitted per bin with np.polyfit and the
+    residuals summed directly, on a sloped noisy image (4 channels, beam off-centre)."""
+    rng = np.random.default_rng(3)
+    rows, cols = np.indices((80, 90))
+    centre = (41.3, 44.8)
+    r = np.hypot(rows - centre[0], cols - centre[1]) * 0.1
+    image = np.stack([np.exp(-r / s) * 100 + rng.normal(0, 0.5, r.shape) for s in (0.5, 1.0, 2.0, 4.0)], -1)
+    prof = radial_profile(image, centre, 0.1, n_bins=12, r_min_mm=0.3, pooled_noise=False)
+    for b in range(prof.count.size):
+        radii = prof.pixel_r_mm[prof.bin_index == b]
+        if radii.size < 3:
+            continue
+        pixels = np.flatnonzero((np.abs(r.reshape(-1)[:, None] - radii[None, :]) < 1e-12).any(axis=1))
+        for c in range(4):
+            values = image.reshape(-1, 4)[pixels, c]
+            line = np.polyval(np.polyfit(r.reshape(-1)[pixels], values, 1), r.reshape(-1)[pixels])
+            variance = np.sum((values - line) ** 2) / max(values.size - 2, 1)
+            assert prof.stderr[b, c] == pytest.approx(np.sqrt(variance / values.size), rel=1e-6)
+            assert prof.mean[b, c] == pytest.approx(values.mean(), rel=1e-12)
+
+
+def test_beam_moments_use_the_window_only():
+    """beam_center and beam_sigma look only at a box around the beam: the same as the
+    moments over the whole image restricted to the disc, computed here directly."""
+    rng = np.random.default_rng(4)
+    rows, cols = np.indices((120, 100))
+    true = (57.4, 38.9)
+    image = np.exp(-((rows - true[0]) ** 2 + (cols - true[1]) ** 2) / (2 * 2.5**2))[..., None] \
+        + rng.normal(0, 1e-3, (120, 100, 1))
+    center = beam_center(image)
+    assert center == pytest.approx(true, abs=0.02)
+    sigma = beam_sigma(image, center, 0.05, radius_mm=1.0)
+    r2 = ((rows - center[0]) ** 2 + (cols - center[1]) ** 2) * 0.05**2
+    weights = np.clip(image[..., 0], 0, None) * (r2 <= 1.0)
+    assert sigma == pytest.approx(np.sqrt((weights * r2).sum() / (2 * weights.sum())), rel=1e-12)
