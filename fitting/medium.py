@@ -5,10 +5,11 @@ Least squares in log space (Jensen 2001 sec. 3): each radial bin contributes
 the bin's standard error, and the measured total diffuse reflectance adds
 :math:`(R_d^{model} - R_d) / s_{R_d}`, the constraint Jensen et al. use to remove the
 ill-conditioning of the profile alone. Parameters are :math:`\ln\sigma_a, \ln\sigma_s'` (so
-both stay positive), solved with optimistix's Levenberg-Marquardt, all channels in one jitted
-call. The start is the best of a scan of mean free paths and albedos (only evaluated): one
-solve from a good start, not many solves that each run until the slowest is done (7 starts
-cost 7 times one). Standard errors come from the
+both stay positive), solved with optimistix's Gauss-Newton, all channels in one jitted call.
+The start is the best of a scan of mean free paths and albedos (only evaluated): one solve
+from a good start, not many solves that each run until the slowest is done (7 starts cost 7
+times one). A channel that does not converge so is solved again by Levenberg-Marquardt from
+7 spread starts. Standard errors come from the
 Jacobian at the solution, :math:`\mathrm{cov} = s^2 (J^T J)^{-1}` with
 :math:`s^2 = \chi^2/(m - 2)`.
 
