@@ -297,8 +297,7 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
         0.01 to 10 mm, the best kept (every start runs until the slowest is done: about
         7 times the cost).
     grid : HankelGrid, optional, keyword-only
-        The transform grid (default :func:`jsss.hankel.hankel_grid`, about 2 s to build:
-        pass one for repeated fits).
+        The transform grid (default :func:`jsss.hankel.hankel_grid`, built once per process).
 
     Returns
     -------

@@ -53,3 +53,14 @@ def test_bad_grids_are_rejected(kwargs):
     """Empty or inverted ranges and too few nodes raise ValueError."""
     with pytest.raises(ValueError, match="hankel_grid"):
         hankel.hankel_grid(**kwargs)
+
+
+def test_a_grid_is_built_once_per_shape_and_dtype():
+    """The Bessel moments take seconds: the same arguments give the same grid object; another
+    size or dtype gives its own, in that dtype."""
+    from jsss.hankel import hankel_grid
+
+    assert hankel_grid(n=64) is hankel_grid(n=64)
+    assert hankel_grid(n=64) is not hankel_grid(n=65)
+    small = hankel_grid(n=64, dtype=np.float32)
+    assert small.forward_matrix.dtype == np.float32 and hankel_grid(n=64).forward_matrix.dtype == np.float64
