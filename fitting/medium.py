@@ -164,8 +164,8 @@ def _residuals(params, args):
 def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, k, grid_r, bins_operator,
                   total_operator, *, max_steps, rtol, atol, model, n_starts, multistart):
     # From a scanned start, Gauss-Newton takes 6-16 steps where Levenberg-Marquardt took 20-90
-    # (its trust region grows slowly), to the same estimate (1e-12 where chi^2/dof is near 1;
-    # measured on 16 transport images). Levenberg-Marquardt stays for the multistart retry,
+    # (its trust region grows slowly), to the same estimate (within 1e-9 on 13 of 16 transport
+    # images; 0.2-0.5 % on three ketchup images whose chi^2/dof is 6-68). Levenberg-Marquardt stays for the multistart retry,
     # whose far starts need its damping.
     solver = (optx.LevenbergMarquardt if multistart else optx.GaussNewton)(rtol=rtol, atol=atol)
 
@@ -291,7 +291,7 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
     init : {"scan", "multistart"}, keyword-only
         ``"scan"`` (default): ``n_starts`` (default 16) mean free paths log-spaced from 0.001
         to 100 mm, at three albedos around the one the total implies, are evaluated (not
-        solved), and one Levenberg-Marquardt solve starts from the best; a channel whose
+        solved), and one Gauss-Newton solve starts from the best; a channel whose
         solve does not converge is solved again as ``"multistart"`` and the lower loss kept.
         ``"multistart"``: a solve from each of ``n_starts`` (default 7) mean free paths from
         0.01 to 10 mm, the best kept (every start runs until the slowest is done: about

@@ -268,6 +268,17 @@ def total_reflectance(medium: Medium, *, g: float = 0.0):
                                                data["absorption"]))
 
 
+def _exit_bins(cos_exit: float) -> list[tuple[int, float]]:
+    """The exit-angle bins toward one (concrete) cosine and their weights, linear in mu between
+    bin centres. Beyond the outermost centres (a camera along the normal: cos 1 lies past the
+    last node) one bin has all the weight, and only it is listed, so only it is evaluated."""
+    nodes = _tables()["mu_nodes"]
+    position = float(np.interp(cos_exit, nodes, np.arange(nodes.size)))
+    lower = min(int(np.floor(position)), nodes.size - 2)
+    t = position - lower
+    return [(m, w) for m, w in ((lower, 1 - t), (lower + 1, t)) if w != 0]
+
+
 def radiance(medium: Medium, r, cos_exit, *, g: float = 0.0):
     r"""Radiance leaving the surface at ``r`` toward exit cosine ``cos_exit`` [1/(mm^2 sr)],
     per unit entering flux: what a camera at that angle records (before its own units).
@@ -289,13 +300,8 @@ def radiance(medium: Medium, r, cos_exit, *, g: float = 0.0):
     if is_concrete(cos_exit) and np.ptp(np.asarray(cos_exit)) == 0:
         # One exit angle for every radius (a camera, a fit): only its two neighbouring bins
         # are evaluated, a quarter of the radial interpolation's cost.
-        position = float(np.interp(float(np.asarray(cos_exit).reshape(-1)[0]), nodes, np.arange(nodes.size)))
-        lower = min(int(np.floor(position)), nodes.size - 2)
-        t = position - lower
-        # Beyond the outermost bins (a camera along the normal: cos 1 > the last node) one
-        # bin has all the weight: evaluate only that one.
         mixed = sum(weight * jnp.exp(_radial(log_rows[..., m, :], rho, data["rho_edges"]))
-                    for m, weight in ((lower, 1 - t), (lower + 1, t)) if weight != 0)
+                    for m, weight in _exit_bins(float(np.asarray(cos_exit).reshape(-1)[0])))
         return sigma_s_prime**2 * jnp.maximum(mixed - _FLOOR, 0.0)
     per_bin = jnp.stack([jnp.exp(_radial(log_rows[..., m, :], rho, data["rho_edges"])) for m in range(nodes.size)],
                         axis=-1)
@@ -330,11 +336,7 @@ def fixed_slice(eta, *, g: float = 0.0, cos_exit: float | None = None) -> FixedS
     if cos_exit is None:
         return FixedSlice(_interpolate_eta(data["log_exitance"][:, _g_index(g)], eta, data["etas"])[..., None, :, :],
                           (1.0,))
-    nodes = data["mu_nodes"]
-    position = float(np.interp(float(cos_exit), nodes, np.arange(nodes.size)))
-    lower = min(int(np.floor(position)), nodes.size - 2)
-    t = position - lower
-    bins = [(m, w) for m, w in ((lower, 1 - t), (lower + 1, t)) if w != 0]
+    bins = _exit_bins(float(cos_exit))
     table = np.moveaxis(data["log_radiance"][:, _g_index(g)], -1, 1)[:, [m for m, _ in bins]]  # (eta, bins, rho, a)
     return FixedSlice(_interpolate_eta(table, eta, data["etas"]), tuple(float(w) for _, w in bins))
 
