@@ -40,6 +40,7 @@ import optimistix as optx
 import scipy.sparse
 
 from jsss import dipole, hankel, transport
+from jsss.cache import reusable_program
 from jsss.fresnel import exit_lobe
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
@@ -160,6 +161,8 @@ def _residuals(params, args):
     return jnp.concatenate([profile_part, total_part[None]])
 
 
+# Console scripts keep this traced across processes (its tracing is 4-6 s of a command's start).
+@reusable_program(static_argnames=("max_steps", "model", "n_starts", "multistart"))
 @partial(jax.jit, static_argnames=("max_steps", "model", "n_starts", "multistart"))
 def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, k, grid_r, bins_operator,
                   total_operator, *, max_steps, rtol, atol, model, n_starts, multistart):

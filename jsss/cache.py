@@ -8,15 +8,32 @@ call :func:`enable_compilation_cache`, before their first computation.
 Where: ``$JAX_COMPILATION_CACHE_DIR`` if set (JAX's own variable), else ``xla/`` in the jsss
 cache directory (``$JSSS_CACHE_DIR``, else ``$XDG_CACHE_HOME/jsss``, else ``~/.cache/jsss``).
 Set ``JSSS_COMPILATION_CACHE=0`` to turn it off.
+
+XLA's cache keeps compiled programs but not JAX's *tracing* of the Python that makes them,
+which for a fit (optimistix's solvers under ``vmap``) takes 4-6 s of every start. Functions
+decorated with :func:`reusable_program` are therefore also kept traced, as serialized
+``jax.export`` programs under ``jsss-programs/`` in the same directory, when (and only when)
+a console script has turned the cache on. See :func:`reusable_program` for the key. The
+Hankel grid of the fits (3 s of Bessel functions to build, 0.05 s to read) is kept there too,
+under ``jsss-grids/`` (:func:`stored_hankel_grid`).
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import importlib.metadata
 import os
+import re
+import tempfile
 import warnings
 from pathlib import Path
 
-__all__ = ["compilation_cache_dir", "default_cache_dir", "enable_compilation_cache"]
+__all__ = ["compilation_cache_dir", "default_cache_dir", "enable_compilation_cache", "reusable_program",
+           "stored_hankel_grid"]
+
+# Where reusable_program keeps traced programs; None (library default) traces as usual.
+_program_dir: Path | None = None
 
 
 def default_cache_dir() -> Path:
@@ -54,4 +71,131 @@ def enable_compilation_cache() -> Path | None:
         return None
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    global _program_dir
+    _program_dir = path / "jsss-programs"  # JAX's cache reads only its own *-cache files there
     return path
+
+
+def reusable_program(*, static_argnames=()):
+    """Decorate a jitted function so console scripts reuse its tracing across processes.
+
+    Library behaviour is unchanged: until :func:`enable_compilation_cache` has run, or when
+    any argument is a tracer (the call is inside ``jit``, ``vmap`` or ``grad``), the function
+    is called as it is. Otherwise the call's arrays are flattened, and the program for their
+    shapes and dtypes, the pytree structure and the static arguments (``static_argnames``,
+    keyword-only) is loaded from disk, or traced once with ``jax.export`` and stored
+    (atomically). Its compilation then comes from XLA's cache like any other.
+
+    The key also holds the versions of jax, jaxlib, equinox, lineax and optimistix, the
+    backend, the float64 flag and a hash of the sources of jsss, fitting and measure, so a stored program
+    is never run by code other than the one that traced it. That is also why the export's
+    compatibility checks on LAPACK custom calls are off: a program is only ever loaded by the
+    exact jaxlib that wrote it. A file that fails to load is traced again and replaced.
+    """
+
+    def decorate(function):
+        @functools.wraps(function)
+        def wrapper(*args, **kwargs):
+            import jax
+
+            if _program_dir is None:
+                return function(*args, **kwargs)
+            static = {name: kwargs.pop(name) for name in static_argnames if name in kwargs}
+            leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
+            if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
+                return function(*args, **kwargs, **static)
+            leaves = [jax.numpy.asarray(leaf) for leaf in leaves]
+            signature = repr((function.__module__, function.__qualname__, sorted(static.items()), str(treedef),
+                              [(leaf.shape, leaf.dtype.name, leaf.weak_type) for leaf in leaves], _fingerprint()))
+            key = hashlib.sha256(signature.encode()).hexdigest()[:32]
+            program = _loaded.get(key) or _load_or_trace(function, static, treedef, leaves, key)
+            return program.call(*leaves)
+
+        return wrapper
+
+    return decorate
+
+
+_loaded: dict = {}  # key -> jax.export.Exported, for the life of the process
+
+
+def _load_or_trace(function, static, treedef, leaves, key):
+    import jax
+    from jax import export
+
+    path = _program_dir / f"{function.__name__}-{key}.jaxexport"
+    try:
+        program = export.deserialize(bytearray(path.read_bytes()))
+    except Exception:  # missing, truncated or from an incompatible writer: trace again
+        def flat(*flat_leaves):
+            args, kwargs = jax.tree_util.tree_unflatten(treedef, flat_leaves)
+            return function(*args, **kwargs, **static)
+
+        specs = [jax.ShapeDtypeStruct(leaf.shape, leaf.dtype, weak_type=leaf.weak_type) for leaf in leaves]
+        jitted = jax.jit(flat)  # one object: export's own trace and lowering reuse these
+        targets = sorted(set(re.findall(r"custom_call @(\w+)", jitted.trace(*specs).lower().as_text())))
+        program = export.export(jitted, disabled_checks=[
+            export.DisabledSafetyCheck.custom_call(target) for target in targets])(*specs)
+        _write_atomically(path, program.serialize())
+    _loaded[key] = program
+    return program
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, delete=False) as handle:
+            handle.write(data)
+        os.replace(handle.name, path)
+    except OSError as error:  # a read-only cache costs a trace per start, nothing else
+        warnings.warn(f"{path}: cannot keep the traced program there ({error})", stacklevel=3)
+
+
+@functools.lru_cache(maxsize=1)
+def _fingerprint() -> str:
+    """Versions, backend, float64 flag and a hash of the sources whose tracing is stored."""
+    import jax
+
+    versions = []
+    for name in ("jax", "jaxlib", "equinox", "lineax", "optimistix"):
+        try:
+            versions.append(f"{name}={importlib.metadata.version(name)}")
+        except importlib.metadata.PackageNotFoundError:
+            versions.append(f"{name}=?")
+    digest = hashlib.sha256()
+    root = Path(__file__).resolve().parent.parent
+    for package in ("jsss", "fitting", "measure"):
+        for source in sorted((root / package).rglob("*.py")):
+            digest.update(source.relative_to(root).as_posix().encode())
+            digest.update(source.read_bytes())
+    return f"{' '.join(versions)} {jax.default_backend()} x64={jax.config.jax_enable_x64} {digest.hexdigest()}"
+
+
+def stored_hankel_grid(**options):
+    """:func:`jsss.hankel.hankel_grid` with these options, read from disk where a console script
+    turned the cache on and an earlier run stored it (``jsss-grids/``); built and stored
+    otherwise. Without the cache it is :func:`jsss.hankel.hankel_grid` itself."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from . import hankel
+
+    if _program_dir is None:
+        return hankel.hankel_grid(**options)
+    dtype = np.dtype(options.pop("dtype", None) or jnp.result_type(float))
+    # The grid is hankel.py's NumPy/SciPy arithmetic: keyed on that file and those versions only.
+    source = hashlib.sha256(Path(hankel.__file__).read_bytes()).hexdigest()
+    signature = repr((sorted(options.items()), dtype.name, source, np.__version__,
+                      importlib.metadata.version("scipy")))
+    path = _program_dir.parent / "jsss-grids" / f"hankel-{hashlib.sha256(signature.encode()).hexdigest()[:32]}.npz"
+    fields = ("r", "k", "forward_matrix", "inverse_matrix")
+    try:
+        with np.load(path) as stored:
+            return hankel.HankelGrid(*(jnp.asarray(stored[name], dtype=dtype) for name in fields))
+    except Exception:  # missing or damaged: build it, and store it for the next start
+        grid = hankel.hankel_grid(**options, dtype=dtype)
+        with tempfile.TemporaryFile() as buffer:
+            np.savez(buffer, **{name: np.asarray(getattr(grid, name)) for name in fields})
+            buffer.seek(0)
+            _write_atomically(path, buffer.read())
+        return grid

@@ -39,7 +39,7 @@ from .fresnel import fresnel_reflectance
 from .medium import Medium
 from .numerics import append_axes, as_float_array, is_concrete
 
-__all__ = ["FixedSlice", "check_supported", "entry_transmittance", "fixed_slice", "profile", "radiance",
+__all__ = ["FixedSlice", "check_medium", "check_supported", "entry_transmittance", "fixed_slice", "profile", "radiance",
            "slice_values", "table_info", "total_reflectance"]
 
 _FLOOR = 1e-30  # added before taking logs: empty table cells (no photon reached them)
@@ -132,6 +132,14 @@ def check_supported(eta, g) -> None:
     _check_eta(eta)
 
 
+def check_medium(medium: Medium, *, g: float = 0.0) -> None:
+    """Raise ``ValueError`` naming the value when the tables do not cover ``medium`` (its eta,
+    sigma_s' > 0, sigma_a / sigma_s' <= 999) or ``g``: the checks the evaluations make on
+    concrete input, for callers that then evaluate under ``jit``, where they cannot."""
+    _g_index(g)
+    _check(medium)
+
+
 def _check_eta(eta):
     etas = _tables()["etas"]
     eta = np.asarray(eta, float)
@@ -174,6 +182,7 @@ def _catmull_rom(position, n):
     return index, weights
 
 
+@jax.jit  # eager, its 20 small operations were compiled one by one at every start (2 s)
 def _interpolate_eta(log_table, eta, etas):
     """``log_table`` (n_eta, *rest) at each channel's eta (Catmull-Rom): shape ``C + rest``."""
     table = jnp.asarray(log_table, jnp.result_type(eta))

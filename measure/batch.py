@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import csv
-import functools
 import glob
 import logging
 import re
@@ -72,14 +71,6 @@ def _progress(done, total, label, stream=sys.stderr):
     stream.flush()
 
 
-@functools.lru_cache(maxsize=1)
-def _worker_grid():
-    """One Hankel grid per process: built once, reused by every fit of a batch there."""
-    from jsss import hankel
-
-    return hankel.hankel_grid()
-
-
 _ROW_KEYS = ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance", "mean_free_path_mm",
              "rel_residual", "chi2_reduced", "converged", "quality")
 
@@ -98,7 +89,7 @@ def _fit_row(job, options) -> dict:
                                reference_reflectance=overrides.get("reference_reflectance",
                                                                    options["reference_reflectance"]),
                                model=options["model"], g=options["g"], view_angle_deg=options["view_angle_deg"],
-                               grid=_worker_grid(), white_balance=options["white_balance"])
+                               white_balance=options["white_balance"])
         table = result.table()
         for key in _ROW_KEYS:
             for ch, value in zip(table["channels"], table[key]):

@@ -43,6 +43,16 @@ def _enable_x64():
     enable_compilation_cache()
 
 
+@functools.lru_cache(maxsize=None)
+def _grid():
+    """The fits' Hankel grid, once per process, and from disk after the first start (building
+    it is 3 s of Bessel functions; see :func:`jsss.cache.stored_hankel_grid`)."""
+    from jsss.cache import stored_hankel_grid
+
+    _enable_x64()  # the grid's dtype, and the cache it is kept in
+    return stored_hankel_grid()
+
+
 # ----------------------------------------------------------------------------- single measurement
 def _merge_frames(paths, saturation, dark, white_balance="none"):
     """Read exposure brackets (exposure time from each file's metadata: the EXR attribute
@@ -116,7 +126,7 @@ def _load_and_fit(measurement, reference, *, pixel_mm, eta, dark=None, reference
         return fit_measurement(meas_pixels, ref_pixels, float(pixel_mm), float(eta),
                                reference_reflectance=reference_reflectance, model=model, g=g,
                                view_angle_deg=view_angle_deg,
-                               channels=meas.channels, grid=grid)
+                               channels=meas.channels, grid=_grid() if grid is None else grid)
     except MeasurementError as error:
         raise UsageError(f"{meas.path} with reference {ref.path}: {error}") from None
 
@@ -304,7 +314,7 @@ def _demo(args) -> int:
         directory = Path(args.keep) if args.keep else Path(stack.enter_context(
             tempfile.TemporaryDirectory(prefix="jsss-demo-")))
         synthetic = synthesize(marble, pixel_mm=0.05, size=256, beam_sigma_mm=0.05, photons_per_unit=1e5, seed=1,
-                               model="transport")
+                               model="transport", grid=_grid())
         paths = write_measurement(directory, synthetic, name="marble")
         if not args.json:
             where = (f"written to {directory} (marble.exr, marble_ref.exr, marble_dark.exr, marble.json)" if args.keep
@@ -367,9 +377,14 @@ def _view_angle(args):
 
 
 def _version() -> str:
-    from jsss import __version__
+    # From the installed metadata, not ``jsss.__version__``: importing jsss (and JAX) for
+    # --help or --version took 6 s.
+    from importlib.metadata import PackageNotFoundError, version
 
-    return f"{PROG} (jsss) {__version__}"
+    try:
+        return f"{PROG} (jsss) {version('jsss')}"
+    except PackageNotFoundError:  # a source tree that was not installed
+        return f"{PROG} (jsss) unknown"
 
 
 def _parser():

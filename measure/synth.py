@@ -19,10 +19,15 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from functools import partial
+
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from fitting.medium import observable
 from jsss import dipole, hankel, transport
+from jsss.cache import reusable_program
 from jsss.medium import Medium
 
 from .exr import write_exr
@@ -47,16 +52,33 @@ def _observed(medium: Medium, radii_mm: np.ndarray, beam_sigma_mm: float, grid=N
     """What the calibrated image holds (exitance, or pi (1 - F(0)) L toward the camera), the
     model convolved with the Gaussian beam, at the given radii: shape radii.shape + C."""
     grid = hankel.hankel_grid() if grid is None else grid
+    if model == "transport":
+        transport.check_medium(medium, g=g)  # the evaluation below is jitted, where it cannot check
+    view_cos = None if view_angle_deg is None else float(np.cos(np.radians(view_angle_deg)))
+    radii_mm = np.asarray(radii_mm, dtype=float)
+    values = _beam_convolved(medium, grid, jnp.asarray(beam_sigma_mm, grid.r.dtype), radii_mm, model=model, g=float(g),
+                             view_cos=view_cos)
+    return np.asarray(values).reshape(radii_mm.shape + (-1,))
+
+
+# One program, not some sixty eager operations compiled one by one (8 s of fit-params --demo).
+@reusable_program(static_argnames=("model", "g", "view_cos"))
+@partial(jax.jit, static_argnames=("model", "g", "view_cos"))
+def _beam_convolved(medium, grid, beam_sigma_mm, radii_mm, *, model, g, view_cos):
     # The fit's own forward model (fitting.medium.observable), so the two cannot drift apart:
     # a spectrum for the dipole, a profile on the transform grid for transport.
-    view_cos = None if view_angle_deg is None else float(np.cos(np.radians(view_angle_deg)))
-    values, _ = observable(model, float(g), view_cos, medium, grid.k, grid.r)
-    spectrum = np.asarray(values).reshape(np.size(grid.k), -1)
+    values, _ = observable(model, g, view_cos, medium, grid.k, grid.r)
+    spectrum = values.reshape(grid.k.shape[0], -1)
     if model == "transport":
-        spectrum = np.asarray(grid.forward_matrix) @ spectrum
-    spectrum = spectrum * np.exp(-np.asarray(grid.k)[:, None] ** 2 * beam_sigma_mm**2 / 2)
-    on_grid = hankel.inverse(grid, spectrum)
-    return np.asarray(hankel.at_radii(grid, on_grid, radii_mm)).reshape(radii_mm.shape + (-1,))
+        spectrum = grid.forward_matrix @ spectrum
+    spectrum = spectrum * jnp.exp(-grid.k[:, None] ** 2 * beam_sigma_mm**2 / 2)
+    return hankel.at_radii(grid, hankel.inverse(grid, spectrum), radii_mm)
+
+
+@reusable_program(static_argnames=("model", "g"))
+@partial(jax.jit, static_argnames=("model", "g"))
+def _total_reflectance(medium, *, model, g):  # jitted for the reason above (4 s eager)
+    return transport.total_reflectance(medium, g=g) if model == "transport" else dipole.total_reflectance(medium)
 
 
 def _beam(radii_mm, beam_sigma_mm, channels):
@@ -139,9 +161,8 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
         return dark_level + rng.normal(0.0, read_noise, sample.shape) / photons_per_unit
 
     truth = dict(sigma_a=np.asarray(medium.sigma_a).tolist(), sigma_s_prime=np.asarray(medium.sigma_s_prime).tolist(),
-                 eta=np.asarray(medium.eta).tolist(), total_reflectance=np.asarray(
-                     transport.total_reflectance(medium, g=g) if model == "transport"
-                     else dipole.total_reflectance(medium)).tolist(),
+                 eta=np.asarray(medium.eta).tolist(),
+                 total_reflectance=np.asarray(_total_reflectance(medium, model=model, g=float(g))).tolist(),
                  pixel_mm=pixel_mm, size=size, beam_sigma_mm=beam_sigma_mm, center=list(centre),
                  reference_reflectance=reference_reflectance, photons_per_unit=photons_per_unit, read_noise=read_noise,
                  dark_level=dark_level, exposures=None if exposures is None else list(exposures), saturation=saturation,

@@ -35,3 +35,70 @@ def test_cache_directory_follows_the_environment_and_an_unwritable_one_warns(tmp
     assert lines[2] == "None"  # JSSS_COMPILATION_CACHE=0 turns it off
     assert lines[3] == f"None 1 {tmp_path}/a_file/xla"  # unwritable: one warning naming it, no cache
     assert (tmp_path / "jsss" / "xla").is_dir()
+
+
+
+PROGRAM_SCRIPT = """
+import sys
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+jax.config.update("jax_enable_x64", True)
+from jsss import cache, hankel
+
+traces = []
+
+
+@cache.reusable_program(static_argnames=("power",))
+@partial(jax.jit, static_argnames=("power",))
+def solve(matrix, scale, *, power):
+    traces.append(1)  # runs only when JAX traces the Python
+    return jnp.linalg.solve(matrix @ matrix.T + jnp.eye(3), scale * matrix[:, 0] ** power)  # a LAPACK call
+
+
+if sys.argv[2] == "on":
+    cache.enable_compilation_cache()
+matrix = jnp.arange(9.0).reshape(3, 3) / 7
+value = solve(matrix, 2.0, power=2)
+other_static = solve(matrix, 2.0, power=3)
+traced = len(traces)
+inside_jit = jax.jit(lambda m: solve(m, 2.0, power=2))(matrix)  # a tracer argument: the function itself
+grid = cache.stored_hankel_grid(n=64)
+fresh = hankel._built_grid.__wrapped__(1e-4, 1e3, 64, 1e-4, 3e5, 64, "float64")
+same_grid = all(np.array_equal(getattr(grid, f), getattr(fresh, f)) for f in ("r", "k", "forward_matrix",
+                                                                              "inverse_matrix"))
+print(traced, np.asarray(value).tobytes().hex(), np.asarray(other_static).tobytes().hex(),
+      bool(jnp.allclose(inside_jit, value, rtol=1e-14)), same_grid)
+"""
+
+
+def _run_program_script(tmp_path, mode):
+    env = {"PATH": "", "HOME": str(tmp_path), "JSSS_CACHE_DIR": str(tmp_path / "jsss")}
+    out = subprocess.run([sys.executable, "-c", PROGRAM_SCRIPT, str(tmp_path), mode], capture_output=True, text=True,
+                         env=env, timeout=300)
+    assert out.returncode == 0, out.stderr
+    traced, *rest = out.stdout.split()
+    return int(traced), rest
+
+
+def test_a_reusable_program_is_traced_once_across_processes_and_a_damaged_file_is_traced_again(tmp_path):
+    programs = tmp_path / "jsss" / "xla" / "jsss-programs"
+    # Off (the library default): the function itself, traced once per static value; nothing written.
+    traced, plain = _run_program_script(tmp_path, "off")
+    assert traced == 2 and plain[2:] == ["True", "True"]
+    assert not programs.exists()
+    # On: the first process traces and stores one program per static value; the next loads them
+    # and traces nothing, with the same numbers to the last bit as the plain function.
+    assert _run_program_script(tmp_path, "on") == (2, plain)
+    stored = sorted(programs.iterdir())
+    assert len(stored) == 2
+    assert len(list((tmp_path / "jsss" / "xla" / "jsss-grids").iterdir())) == 1
+    assert _run_program_script(tmp_path, "on") == (0, plain)
+    # A truncated file is traced again and replaced, not an error.
+    size = stored[0].stat().st_size
+    stored[0].write_bytes(stored[0].read_bytes()[:100])
+    assert _run_program_script(tmp_path, "on") == (1, plain)
+    assert stored[0].stat().st_size == size

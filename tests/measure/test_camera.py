@@ -129,3 +129,14 @@ def test_dipole_warns_where_its_bias_exceeds_its_stated_error(walk_image, tmp_pa
     table = json.loads(out.stdout)
     assert table["dipole_minus_transport"]["sigma_a"][0] > 0.5
     assert "diffusion's bias, not noise" in out.stderr
+
+
+def test_transport_synthesis_refuses_media_the_tables_do_not_cover(grid):
+    # The synthesis evaluates the tables under jit, where their own checks cannot see values:
+    # it checks first, naming the value.
+    from measure.synth import synthesize
+
+    for medium, g, named in ((Medium(0.01, 1.0, 1.8), 0.0, "eta"), (Medium(0.01, 1.0, 1.3), 0.3, "g"),
+                             (Medium(5.0, 0.001, 1.3), 0.0, "sigma_a / sigma_s_prime")):
+        with pytest.raises(ValueError, match=named):
+            synthesize(medium, size=32, model="transport", g=g, grid=grid)
