@@ -104,6 +104,7 @@ def source_depths(medium: Medium):
     return z_r, z_v
 
 
+@jax.jit  # one program: op by op, 0.8 s per call before a render's first pixel
 def profile(medium: Medium, r):
     r"""Dipole diffuse reflectance profile :math:`R_d(r)` (Jensen 2001 eq. 4) in 1/mm^2.
 
@@ -145,6 +146,7 @@ def radiance(medium: Medium, r, cos_exit):
     return profile(medium, r) * lobe
 
 
+@jax.jit
 def total_reflectance(medium: Medium):
     r"""Total diffuse reflectance :math:`R_d = 2\pi\int_0^\infty R_d(r) r\,dr` (closed form).
 
