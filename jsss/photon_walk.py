@@ -70,9 +70,8 @@ def sample_henyey_greenstein(g, xi):
     return jnp.clip(jnp.where(small, 2 * xi - 1, cos_hg), -1.0, 1.0)
 
 
-def _scatter(direction, cos_theta, phi):
-    """Rotate ``direction`` by polar angle acos(cos_theta) and azimuth phi."""
-    ux, uy, uz = direction
+def _scatter(ux, uy, uz, cos_theta, phi):
+    """Rotate the direction (ux, uy, uz) by polar angle acos(cos_theta) and azimuth phi."""
     sin_theta = jnp.sqrt(jnp.maximum(1 - cos_theta**2, 0.0))
     cos_phi, sin_phi = jnp.cos(phi), jnp.sin(phi)
     near_pole = jnp.abs(uz) > 0.99999
@@ -81,12 +80,18 @@ def _scatter(direction, cos_theta, phi):
     ny = sin_theta * (uy * uz * cos_phi + ux * sin_phi) / denom + uy * cos_theta
     nz = -sin_theta * cos_phi * denom + uz * cos_theta
     px, py, pz = sin_theta * cos_phi, sin_theta * sin_phi, jnp.sign(uz) * cos_theta
-    return jnp.where(near_pole, jnp.stack([px, py, pz]), jnp.stack([nx, ny, nz]))
+    return jnp.where(near_pole, px, nx), jnp.where(near_pole, py, ny), jnp.where(near_pole, pz, nz)
 
 
 class _Lane(NamedTuple):
-    pos: jax.Array        # (3,)
-    direction: jax.Array  # (3,)
+    # Position and direction one array per component (structure of arrays): XLA fuses an
+    # event into one loop over the lanes, where (lanes, 3) arrays cost stacks and copies.
+    x: jax.Array          # mm
+    y: jax.Array
+    z: jax.Array
+    ux: jax.Array
+    uy: jax.Array
+    uz: jax.Array
     weight: jax.Array
     side: jax.Array       # int32, as in WalkRecords
     exit_r: jax.Array
@@ -99,9 +104,9 @@ class _Lane(NamedTuple):
 
 
 def _fresh(photon, dtype):
-    zero = jnp.zeros((), dtype)
-    return _Lane(jnp.zeros(3, dtype), jnp.array([0.0, 0.0, 1.0], dtype), jnp.ones((), dtype), jnp.int32(0), zero,
-                 zero, zero, jnp.int32(0), jnp.bool_(False), jnp.int32(0), photon)
+    zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
+    return _Lane(zero, zero, zero, zero, zero, one, one, jnp.int32(0), zero, zero, zero, jnp.int32(0),
+                 jnp.bool_(False), jnp.int32(0), photon)
 
 
 _ROTATIONS = (13, 15, 26, 6, 17, 29, 16, 24)
@@ -132,8 +137,8 @@ def _event(lane: _Lane, key, params) -> _Lane:
     """Advance one lane by one event (a collision or a boundary)."""
     sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below = params
     n_layers = sigma_t.shape[0]
-    pos, direction, layer = lane.pos, lane.direction, lane.layer
-    dtype = pos.dtype
+    layer = lane.layer
+    dtype = lane.z.dtype
     photon, event = lane.photon.astype(jnp.uint32), 2 * lane.steps.astype(jnp.uint32)
     bits = jnp.stack(threefry_2x32(key, (photon, event)) + threefry_2x32(key, (photon, event + 1)))
     # Uniforms in (0, 1) from 32 bits: a free path is cut at -ln(2^-33) = 23 mean free paths
@@ -142,15 +147,15 @@ def _event(lane: _Lane, key, params) -> _Lane:
     u_path, u_turn, u_phi, u_roulette = (bits.astype(dtype) + 0.5) * (2.0**-32)
     u_fresnel = u_theta = u_turn
     s = -jnp.log(u_path) / sigma_t[layer]
-    dz = direction[2]
-    to_top = jnp.where(dz < 0, (pos[2] - tops[layer]) / jnp.where(dz < 0, -dz, 1.0), jnp.inf)
-    to_bottom = jnp.where(dz > 0, (bottoms[layer] - pos[2]) / jnp.where(dz > 0, dz, 1.0), jnp.inf)
+    dz = lane.uz
+    to_top = jnp.where(dz < 0, (lane.z - tops[layer]) / jnp.where(dz < 0, -dz, 1.0), jnp.inf)
+    to_bottom = jnp.where(dz > 0, (bottoms[layer] - lane.z) / jnp.where(dz > 0, dz, 1.0), jnp.inf)
     to_boundary = jnp.minimum(to_top, to_bottom)
     hits = s >= to_boundary
     up = to_top <= to_bottom
     step = jnp.where(hits, to_boundary, s)
-    new_pos = pos + direction * step
-    new_pos = new_pos.at[2].set(jnp.where(hits, jnp.where(up, tops[layer], bottoms[layer]), new_pos[2]))
+    x, y = lane.x + lane.ux * step, lane.y + lane.uy * step
+    z = jnp.where(hits, jnp.where(up, tops[layer], bottoms[layer]), lane.z + dz * step)
     # Boundary: Fresnel reflection or transmission (with refraction into the next layer).
     neighbour = jnp.where(up, layer - 1, layer + 1)
     outside = (neighbour < 0) | (neighbour >= n_layers)
@@ -162,19 +167,22 @@ def _event(lane: _Lane, key, params) -> _Lane:
     crosses = hits & ~reflects & ~outside
     ratio = n1 / n2
     cos_t = jnp.sqrt(jnp.maximum(1 - ratio**2 * (1 - dz**2), 0.0))
-    refracted = jnp.stack([direction[0] * ratio, direction[1] * ratio, jnp.sign(dz) * cos_t])
-    mirrored = direction * jnp.array([1.0, 1.0, -1.0], dtype)
     # Collision: absorb by weight, scatter by HG, roulette below 1e-4.
-    scattered = _scatter(direction, sample_henyey_greenstein(g[layer], u_theta), 2 * jnp.pi * u_phi)
+    sx, sy, sz = _scatter(lane.ux, lane.uy, dz, sample_henyey_greenstein(g[layer], u_theta), 2 * jnp.pi * u_phi)
     collided_weight = lane.weight * albedo[layer]
     low = collided_weight < 1e-4
     collided_weight = jnp.where(low, jnp.where(u_roulette < 0.1, collided_weight * 10, 0.0), collided_weight)
-    new_direction = jnp.where(hits, jnp.where(reflects, mirrored, jnp.where(crosses, refracted, direction)),
-                              scattered)
+
+    def turned(component, refracted, mirrored, scattered):  # reflected, refracted, straight on, or scattered
+        return jnp.where(hits, jnp.where(reflects, mirrored, jnp.where(crosses, refracted, component)), scattered)
+
+    new_ux = turned(lane.ux, lane.ux * ratio, lane.ux, sx)
+    new_uy = turned(lane.uy, lane.uy * ratio, lane.uy, sy)
+    new_uz = turned(dz, jnp.sign(dz) * cos_t, -dz, sz)
     new_weight = jnp.where(hits, lane.weight, collided_weight)
     side = jnp.where(leaves, jnp.where(up, 1, 2), jnp.where(new_weight == 0, 3, 0)).astype(jnp.int32)
-    return _Lane(new_pos, new_direction, new_weight, side,
-                 jnp.where(leaves, jnp.hypot(new_pos[0], new_pos[1]), lane.exit_r),
+    return _Lane(x, y, z, new_ux, new_uy, new_uz, new_weight, side,
+                 jnp.where(leaves, jnp.hypot(x, y), lane.exit_r),
                  jnp.where(leaves, cos_t, lane.exit_cos), lane.path + step, lane.steps + 1,
                  lane.collided | ~hits, jnp.where(crosses, neighbour, layer), lane.photon)
 
@@ -188,7 +196,7 @@ def _record(lane: _Lane):
 
 
 _CHUNK = 64  # refills per jitted call: progress and the survivor compaction happen between calls
-_EVENTS_PER_REFILL = 4
+_EVENTS_PER_REFILL = 8
 _CAPACITY = 1 << 16  # rows of records one call may return
 
 
