@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..medium import Medium
-from .blur import blur_schedule, hierarchical_blur
+from .blur import blur_schedule, hierarchical_blur, uniform_stretch
 from .image_space import SampledProfile, camera_buffers
 from .lighting import irradiance, light_geometry, lookup, shadow_map, translucent_transmission
 from .mesh import is_closed
@@ -119,6 +119,9 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
         stretch = texels.stretch
     else:  # uniform: the median texel length everywhere
         stretch = np.where(texels.mask[..., None], texels.median_stretch(), 0.0)
+    # One (2,) pair where every valid texel has the same stretch (a plane): the blur then reads
+    # its taps as slices, not gathers (decided here: in the jitted passes the map is traced).
+    stretch = uniform_stretch(stretch, texels.mask)
     schedule = blur_schedule(np.asarray(plan.variances), texels.median_stretch(), max_ratio=plan.max_ratio) \
         if plan.on("diffusion") else None
     margin = 0
@@ -154,7 +157,8 @@ def diffusion_pass(params: RenderParams, prep: Prepared, plan: Plan, E):
         cols = (0, 0) if prep.texels.wrap_u else (m, m)
         E = jnp.pad(E, (rows, cols, (0, 0)))
         mask = jnp.pad(mask, (rows, cols), constant_values=1.0)
-        stretch = jnp.pad(stretch, (rows, cols, (0, 0)), mode="edge")
+        if stretch.ndim == 3:  # a (2,) pair holds for the margin too
+            stretch = jnp.pad(stretch, (rows, cols, (0, 0)), mode="edge")
     blurred = hierarchical_blur(E, mask, stretch, params.variances, prep.schedule, taps=plan.taps,
                                 wrap_u=prep.texels.wrap_u)
     if m:

@@ -1,10 +1,12 @@
 """Blurs: exact moments, the analytic Gaussian, chains equal direct blurs, stretch and wrap."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jsss.render.blur import blur_schedule, blur_step, hierarchical_blur, kernel, spacing_for_variance
+from jsss.render.blur import (_chain, uniform_stretch, blur_schedule, blur_step, hierarchical_blur, kernel,
+                              spacing_for_variance)
 
 S = 128
 
@@ -123,3 +125,35 @@ def test_masked_texels_neither_receive_nor_give_light():
 def test_schedule_rejects_unsorted_variances():
     with pytest.raises(ValueError, match="strictly increasing"):
         blur_schedule([4.0, 1.0], 1.0)
+
+
+@pytest.mark.parametrize("wrap_u", [False, True])
+def testuniform_stretch_slices_equal_the_per_texel_gathers_and_their_gradients(wrap_u):
+    """One stretch for every texel (a plane) reads taps as shifted slices; a per-texel map of
+    the same values reads them by gathers. Same blur, same derivative in the variance, at
+    spacings below a texel, between texels and beyond the texture (variance 3000 texels^2)."""
+    rng = np.random.default_rng(5)
+    tex = jnp.asarray(rng.uniform(size=(S, S + 7, 2)))
+    mask = (rng.uniform(size=(S, S + 7)) > 0.1).astype(float)  # holes: the normalisation matters
+    pair = jnp.asarray([0.5, 0.25])
+    per_texel = jnp.broadcast_to(pair, mask.shape + (2,))
+    for v in (0.02, 1.7, 30.0, 190.0):
+        sliced = blur_step(tex, mask, pair, v, wrap_u=wrap_u)
+        gathered = blur_step(tex, mask, per_texel, v, wrap_u=wrap_u)
+        assert np.abs(np.asarray(sliced) - np.asarray(gathered)).max() < 1e-12, v
+
+        def loss(variance, stretch):
+            return jnp.sum(blur_step(tex, mask, stretch, variance, wrap_u=wrap_u) * tex)
+
+        d_sliced, d_gathered = jax.grad(loss)(v, pair), jax.grad(loss)(v, per_texel)
+        assert np.isfinite(float(d_sliced)) and float(d_sliced) == pytest.approx(float(d_gathered), rel=1e-9, abs=1e-12)
+    # The chain finds the uniform stretch itself, whatever invalid texels hold.
+    holes = np.where(mask[..., None] > 0, np.asarray(per_texel), 0.0)
+    schedule = blur_schedule([1.0, 8.0, 40.0], 0.5)
+    chain = hierarchical_blur(tex, mask, holes, jnp.asarray([1.0, 8.0, 40.0]), schedule, wrap_u=wrap_u)
+    gathered = _chain(tex, jnp.asarray(mask), jnp.asarray(holes), jnp.asarray([1.0, 8.0, 40.0]),
+                      jnp.asarray(schedule.first_variance_ratio), substeps=schedule.substeps, taps=7, wrap_u=wrap_u)
+    assert uniform_stretch(holes, mask).shape == (2,)
+    isotropic = np.where(mask[..., None] > 0, 0.3, 0.0)  # one length per texel, (H, W, 1), as a plane's
+    assert np.asarray(uniform_stretch(isotropic, mask)).tolist() == [0.3, 0.3]
+    assert np.abs(np.asarray(chain) - np.asarray(gathered)).max() < 1e-12
