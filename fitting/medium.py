@@ -168,8 +168,8 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
                   total_operator, *, max_steps, rtol, atol, model, n_starts, multistart):
     # From a scanned start, Gauss-Newton takes 6-16 steps where Levenberg-Marquardt took 20-90
     # (its trust region grows slowly), to the same estimate (within 1e-9 on 13 of 16 transport
-    # images; 0.2-0.5 % on three ketchup images whose chi^2/dof is 6-68). Levenberg-Marquardt stays for the multistart retry,
-    # whose far starts need its damping.
+    # images; 0.2-0.5 % on three ketchup images whose chi^2/dof is 6-68). Levenberg-Marquardt
+    # stays for the multistart retry, whose far starts need its damping.
     solver = (optx.LevenbergMarquardt if multistart else optx.GaussNewton)(rtol=rtol, atol=atol)
 
     def one(meas, err, total, total_err, scale_err, eta_c, fixed_c):

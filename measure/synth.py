@@ -17,9 +17,8 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from pathlib import Path
-
 from functools import partial
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp

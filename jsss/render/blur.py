@@ -102,46 +102,49 @@ def _lerp_along(values, positions, axis: int, wrap: bool):
     return (1 - f) * v0 * inside0 + f * v1 * inside1
 
 
-def _blur_pass(texture, mask, spacing, axis: int, taps: int, wrap: bool):
-    offsets, weights = kernel(taps)
-    index = jnp.arange(texture.shape[axis], dtype=spacing.dtype)
-    base = index[:, None] if axis == 0 else index[None, :]
-    stacked = jnp.concatenate([texture * mask[..., None], mask[..., None]], axis=-1)
-    total = 0.0
-    for k, w in zip(offsets, weights):
-        total = total + float(w) * _lerp_along(stacked, base + float(k) * spacing, axis, wrap)
-    numerator, weight = total[..., :-1], total[..., -1:]
-    has = weight > 1e-12
-    return jnp.where(has, numerator / jnp.where(has, weight, 1.0), 0.0) * mask[..., None]
-
-
-def _uniform_pass(texture, mask, spacing, axis: int, taps: int, wrap: bool):
-    """:func:`_blur_pass` for one spacing (a scalar) at every texel: each tap reads the texture
-    shifted by the same fractional offset, so its two reads are slices at a traced start
-    (``dynamic_slice``), not gathers. Same arithmetic: the offset's integer part and fraction."""
-    offsets, weights = kernel(taps)
-    stacked = jnp.concatenate([texture * mask[..., None], mask[..., None]], axis=-1)
-    n = stacked.shape[axis]
+def _shifted_lerp(values, axis: int, wrap: bool):
+    """For one offset shared by every texel: ``read(x)`` is ``values`` (H, W, C) linearly
+    interpolated at ``i + x`` along ``axis`` (x a traced scalar), its two reads slices at a
+    traced start (``dynamic_slice``) instead of :func:`_lerp_along`'s per-texel gathers, with
+    the same integer part and fraction (and zeros, or the period, beyond the edge)."""
+    n = values.shape[axis]
     if wrap:  # periodic: read from two copies side by side
-        source = jnp.concatenate([stacked, stacked], axis=axis)
+        source = jnp.concatenate([values, values], axis=axis)
     else:  # zeros beyond the edge; a shift of n or more lands wholly in the padding
         pad = [(0, 0)] * 3
         pad[axis] = (n + 1, n + 1)
-        source = jnp.pad(stacked, pad)
+        source = jnp.pad(values, pad)
 
-    def shifted(offset):  # out[i] = stacked[i + offset] along axis
+    def shifted(offset):  # out[i] = values[i + offset] along axis
         start = jnp.mod(offset, n) if wrap else jnp.clip(offset, -(n + 1), n + 1) + n + 1
         starts = [jnp.int32(0)] * 3
         starts[axis] = start.astype(jnp.int32)
-        return jax.lax.dynamic_slice(source, starts, stacked.shape)
+        return jax.lax.dynamic_slice(source, starts, values.shape)
 
-    total = 0.0
-    for k, w in zip(offsets, weights):
-        x = float(k) * spacing
+    def read(x):
         i0 = jnp.floor(x)
         f = x - i0
         i0 = i0.astype(jnp.int32)
-        total = total + float(w) * ((1 - f) * shifted(i0) + f * shifted(i0 + 1))
+        return (1 - f) * shifted(i0) + f * shifted(i0 + 1)
+
+    return read
+
+
+def _blur_pass(texture, mask, spacing, axis: int, taps: int, wrap: bool):
+    """One normalised 1D pass. ``spacing`` per texel (H, W) reads each tap by gathers; one
+    scalar spacing for every texel (a uniform stretch) reads it by shifted slices."""
+    offsets, weights = kernel(taps)
+    stacked = jnp.concatenate([texture * mask[..., None], mask[..., None]], axis=-1)
+    if jnp.ndim(spacing) == 0:
+        read = _shifted_lerp(stacked, axis, wrap)
+        taps_read = [read(float(k) * spacing) for k in offsets]
+    else:
+        index = jnp.arange(texture.shape[axis], dtype=spacing.dtype)
+        base = index[:, None] if axis == 0 else index[None, :]
+        taps_read = [_lerp_along(stacked, base + float(k) * spacing, axis, wrap) for k in offsets]
+    total = 0.0
+    for w, tap in zip(weights, taps_read):
+        total = total + float(w) * tap
     numerator, weight = total[..., :-1], total[..., -1:]
     has = weight > 1e-12
     return jnp.where(has, numerator / jnp.where(has, weight, 1.0), 0.0) * mask[..., None]
@@ -157,8 +160,9 @@ def blur_step(texture, mask, stretch, variance, *, taps: int = 7, wrap_u: bool =
         1 on valid texels, 0 elsewhere.
     stretch : array, shape (H, W, 2) or (2,)
         World length of one texel step along u and v [mm]. One pair for every texel (shape
-        (2,), a plane) reads each tap as a shifted slice: about 20x faster on CPU than the
-        per-texel gathers a varying stretch needs, with the same result.
+        (2,), a plane) reads each tap as a shifted slice instead of the per-texel gathers a
+        varying stretch needs, with the same result (a step on 768^2 x 3 on 2 CPU cores: 213
+        against 345 ms).
     variance : scalar [mm^2]
     """
     dtype = texture.dtype
@@ -166,8 +170,8 @@ def blur_step(texture, mask, stretch, variance, *, taps: int = 7, wrap_u: bool =
     stretch = jnp.asarray(stretch, dtype)
     if stretch.shape == (2,):
         spacing = spacing_for_variance(variance / stretch**2, taps=taps, max_spacing=max(texture.shape[:2]))
-        out = _uniform_pass(texture, mask, spacing[0], 1, taps, wrap_u)
-        return _uniform_pass(out, mask, spacing[1], 0, taps, False)
+        out = _blur_pass(texture, mask, spacing[0], 1, taps, wrap_u)
+        return _blur_pass(out, mask, spacing[1], 0, taps, False)
     stretch = jnp.broadcast_to(stretch, mask.shape + (2,))
     safe = jnp.where(stretch > 0, stretch, 1.0)
     size = max(texture.shape[:2])
