@@ -6,7 +6,7 @@ import pytest
 
 from jsss import Medium
 from jsss.montecarlo import random_walk
-from jsss.photon_walk import threefry_2x32
+from jsss.photon_walk import threefry_2x32, turn_cos_sin
 
 
 @pytest.mark.parametrize(
@@ -29,6 +29,22 @@ def test_threefry_bits_are_uniform():
     for word in (x0, x1):
         counts = np.bincount(np.asarray(word) >> 28, minlength=16)
         assert stats.chisquare(counts).pvalue > 1e-3
+
+
+@pytest.mark.parametrize("dtype, tolerance", [(jnp.float64, 1e-15), (jnp.float32, 3e-7)])
+def test_turn_cos_sin_matches_numpy_over_the_whole_turn(dtype, tolerance):
+    # The walk's uniforms are (bits + 0.5) 2^-32; add the quarter-turn boundaries, where the
+    # polynomial pair is swapped and negated, and the ends.
+    quarters = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+    u = np.concatenate([(np.arange(0, 2**32, 2**32 // 200003, dtype=np.float64) + 0.5) * 2.0**-32,
+                        quarters, np.nextafter(quarters, 2), np.nextafter(quarters, -1)[1:]])
+    u = np.clip(u, 0, 1).astype(dtype)
+    cos, sin = turn_cos_sin(jnp.asarray(u))
+    angle = 2 * np.pi * u.astype(np.float64)
+    assert cos.dtype == dtype
+    assert np.max(np.abs(np.asarray(cos, np.float64) - np.cos(angle))) < tolerance
+    assert np.max(np.abs(np.asarray(sin, np.float64) - np.sin(angle))) < tolerance
+    assert np.max(np.abs(np.hypot(np.asarray(cos, np.float64), np.asarray(sin, np.float64)) - 1)) < tolerance
 
 
 def test_result_does_not_depend_on_the_lane_count():
