@@ -165,7 +165,7 @@ def fit_pixels(scene: Scene, photo, *, mask=None, saturation: float | None = Non
         raise RenderFitError(f"photo: {photo.shape[1]} x {photo.shape[0]} pixels, but the scene's camera renders "
                              f"{cam.width} x {cam.height}; set [camera] resolution to the photo's size.")
     buffers = camera_buffers(scene.mesh, cam)
-    inside = ndimage.binary_erosion(buffers.mask, structure=np.ones((3, 3), bool), border_value=1)
+    inside = ndimage.binary_erosion(buffers.coverage >= 1, structure=np.ones((3, 3), bool), border_value=1)
     facing = (buffers.normal * buffers.view).sum(-1) >= min_cos
     use = inside & facing
     if mask is not None:
@@ -249,7 +249,7 @@ def _texture_data(scene: Scene, plan, dtype, blur_dtype=jnp.float32) -> _Texture
                         jnp.asarray(_profile_radii(plan.variances), dtype),
                         exit_lobe(cos_view[..., None], params.eta), jnp.asarray(single_radiance, dtype),
                         jnp.asarray(single_exitance, dtype), jnp.asarray(spec, dtype),
-                        jnp.asarray(prep.pixel_mask, dtype))
+                        jnp.asarray(prep.coverage, dtype))
 
 
 def _texture_radiance(medium, data: _TextureData, profile_model: str, g: float):

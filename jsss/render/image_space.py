@@ -28,8 +28,10 @@ Variance reduction (sec. 6.1): radii are drawn exactly from the profile (the dip
 share of samples uniformly over a disc of radius :math:`R'` for shadow borders where few
 importance samples land, combined with the balance heuristic
 :math:`q = N_{imp}\,q_{imp} + N_{uni}\,q_{uni}`; the sample pattern is a low-discrepancy
-(Kronecker) point set, shifted per pixel from a 4 x 4 tile of offsets (interleaved
-sampling: noise becomes a fine dither). Three colour channels share one set of samples:
+(Kronecker) point set, shifted by its own random offset at every pixel (a Cranley-Patterson
+rotation per pixel: each pixel keeps the point set's even coverage, and the errors of
+neighbouring pixels are independent). An earlier 4 x 4 tile of offsets repeated every
+fourth pixel and showed as a regular grid over the whole object. Three colour channels share one set of samples:
 the importance density is the mixture of the three channels' densities, each channel
 drawn in proportion to its albedo.
 
@@ -63,11 +65,10 @@ from ..medium import Medium
 from ..numerics import is_concrete, safe_sqrt
 from ..sampling import sample_dipole_radius
 from .mesh import Mesh
-from .raster import PerspectiveView, Raster, rasterize, surface_attributes
+from .raster import PerspectiveView, Raster, antialiased_raster, surface_attributes
 
 __all__ = ["CameraBuffers", "SampledProfile", "camera_buffers", "image_space_exitance", "profile_radius", "rms_radius"]
 
-TILE = 4  # interleaved sampling: pixels in a TILE x TILE block use different pattern offsets
 GAP_RATIO = 1.0  # depth discontinuity: the surface lies farther from p' than this times |p' - x|
 GRAZING_COSINE = 0.05  # the Jacobian's cos(alpha) is held above this at silhouettes
 _KRONECKER = 1.0 / 1.2207440846057594753 ** np.arange(1, 4)  # R3 sequence (Roberts 2018)
@@ -208,15 +209,23 @@ class CameraBuffers:
     def shape(self):
         return self.mask.shape
 
+    @property
+    def coverage(self) -> np.ndarray:
+        """(H, W) share of each pixel's area the surface covers: the pixel filter's weight."""
+        return self.raster.weight
+
 
 def camera_buffers(mesh: Mesh, camera: PerspectiveView) -> CameraBuffers:
     """Rasterize ``mesh`` from ``camera``: each pixel's surface point, normal and depth.
 
     Normals are turned towards the camera (a surface seen from behind, like an open fin, is
-    shaded from the side we see).
+    shaded from the side we see). Silhouette pixels carry their coverage (3 x 3 sub-samples,
+    :func:`~jsss.render.raster.antialiased_raster`); one whose centre misses the surface is
+    shaded at the covered sub-sample nearest its centre, and every frame's radiance is
+    weighted by the coverage, so edges are filtered instead of stair-stepped.
     """
     xy, z = camera.project(mesh.vertices)
-    raster = rasterize(xy, z, mesh.faces, (camera.height, camera.width))
+    raster = antialiased_raster(xy, z, mesh.faces, (camera.height, camera.width))
     mask = raster.mask
     position = surface_attributes(raster, mesh.faces, mesh.vertices)
     normal = surface_attributes(raster, mesh.faces, mesh.normals)
@@ -241,8 +250,8 @@ def _tangent_frame(n):
     return t, s
 
 
-def sample_pattern(samples: int, uniform_fraction: float, *, seed: int = 0):
-    """The per-sample pattern: (N, 3) base points, (N,) importance flags, (T, T, 3) offsets."""
+def sample_pattern(samples: int, uniform_fraction: float, shape: tuple[int, int], *, seed: int = 0):
+    """The per-sample pattern: (N, 3) base points, (N,) importance flags, (H, W, 3) offsets."""
     n_uniform = int(round(uniform_fraction * samples))
     n_importance = samples - n_uniform
     if n_importance < 1:
@@ -253,7 +262,7 @@ def sample_pattern(samples: int, uniform_fraction: float, *, seed: int = 0):
 
     base = np.concatenate([kronecker(n_importance), kronecker(n_uniform)])
     importance = np.arange(samples) < n_importance
-    offsets = np.random.default_rng(seed).random((TILE, TILE, 3))
+    offsets = np.random.default_rng(seed).random(tuple(shape) + (3,))
     return base, importance, offsets, n_importance, n_uniform
 
 
@@ -276,7 +285,7 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
     disc_radius : float [mm], optional
         Radius :math:`R'` of that disc; default :func:`profile_radius` (95 % of the light).
     seed : int
-        Picks the interleaved pattern offsets.
+        Picks the pattern's offset at each pixel.
 
     Returns
     -------
@@ -295,8 +304,7 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
             raise ValueError("image_space_exitance: pass disc_radius= when the profile is traced "
                              "(under jit or grad); profile_radius(profile) gives the default.")
         disc_radius = profile_radius(profile)
-    base, importance, offsets, n_imp, n_uni = sample_pattern(samples, uniform_fraction, seed=seed)
-    tiled = np.tile(offsets, (H // TILE + 1, W // TILE + 1, 1))[:H, :W]
+    base, importance, offsets, n_imp, n_uni = sample_pattern(samples, uniform_fraction, (H, W), seed=seed)
 
     def const(a):
         return jnp.asarray(a, dtype)
@@ -327,7 +335,7 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
 
     def step(total, xs):
         point, is_importance = xs
-        u = jnp.mod(point + const(tiled), 1.0)
+        u = jnp.mod(point + const(offsets), 1.0)
         r = jnp.where(is_importance, profile.sample(u[..., 0], u[..., 1]), R * jnp.sqrt(u[..., 1]))
         phi = 2 * jnp.pi * u[..., 2]
         p_tangent = x + r[..., None] * (jnp.cos(phi)[..., None] * t + jnp.sin(phi)[..., None] * s)

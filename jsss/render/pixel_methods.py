@@ -131,7 +131,7 @@ def pixel_radiance(method: str, profile: SampledProfile, radiant, eta, prep: Pix
     the dipole, sampled through its Gaussians), else the dipole ``profile``'s own."""
     M = pixel_exitance(method, profile, radiant, eta, prep, samples=samples, seed=seed)
     dtype = M.dtype
-    mask = jnp.asarray(prep.buffers.mask, dtype)
+    coverage = jnp.asarray(prep.buffers.coverage, dtype)
     cos_view = jnp.asarray((prep.buffers.normal * prep.buffers.view).sum(-1), dtype)
     lights = [g.astype(dtype) for g in prep.lights]
     medium = (profile.medium if medium is None else medium) if single_scattering else None
@@ -140,4 +140,4 @@ def pixel_radiance(method: str, profile: SampledProfile, radiant, eta, prep: Pix
     if specular:
         L = L + specular_radiance(prep.buffers.normal, prep.buffers.view, lights, radiant, eta,
                                   roughness=roughness, weight=specular_weight)
-    return L * mask[..., None]
+    return L * coverage[..., None]

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["OrthographicView", "PerspectiveView", "Raster", "rasterize", "surface_attributes"]
+__all__ = ["OrthographicView", "PerspectiveView", "Raster", "antialiased_raster", "rasterize", "surface_attributes"]
 
 _MAX_CANDIDATES = 1 << 22  # (triangle, pixel) pairs tested at once: bounds the memory of one chunk
 
@@ -105,15 +105,23 @@ class OrthographicView:
 
 @dataclass(frozen=True)
 class Raster:
-    """Per pixel: covering triangle (``-1`` for none), barycentric weights, depth."""
+    """Per pixel: covering triangle (``-1`` for none), barycentric weights, depth, and the
+    share of the pixel's area the surface covers (``None``: 1 where a triangle covers the
+    centre, else 0)."""
 
     face: np.ndarray
     bary: np.ndarray
     depth: np.ndarray
+    coverage: np.ndarray | None = None
 
     @property
     def mask(self) -> np.ndarray:
         return self.face >= 0
+
+    @property
+    def weight(self) -> np.ndarray:
+        """Coverage in [0, 1] per pixel: what a pixel filter multiplies the surface's radiance by."""
+        return self.mask.astype(float) if self.coverage is None else self.coverage
 
 
 def _chunks(counts):
@@ -127,7 +135,7 @@ def _chunks(counts):
         yield start, len(counts)
 
 
-def rasterize(xy, depth, faces, shape, *, perspective: bool = True) -> Raster:
+def rasterize(xy, depth, faces, shape, *, perspective: bool = True, where=None) -> Raster:
     """Depth-tested coverage of triangles at pixel centres.
 
     Parameters
@@ -140,6 +148,8 @@ def rasterize(xy, depth, faces, shape, *, perspective: bool = True) -> Raster:
     shape : (H, W)
     perspective : bool, keyword-only
         Interpolate with perspective correction (weights over depth) rather than linearly.
+    where : ndarray of bool, shape (H, W), optional
+        Only these pixels are tested (the others stay uncovered).
 
     Returns
     -------
@@ -168,6 +178,9 @@ def rasterize(xy, depth, faces, shape, *, perspective: bool = True) -> Raster:
         k = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
         px = x0[tri] + k % bw[tri]
         py = y0[tri] + k // bw[tri]
+        if where is not None:
+            wanted = where[py, px]
+            tri, px, py = tri[wanted], px[wanted], py[wanted]
         cx, cy = px + 0.5, py + 0.5
         t = p[tri]
         # Edge functions: barycentric weight of vertex i is the area opposite it.
@@ -200,3 +213,66 @@ def surface_attributes(raster: Raster, faces, attribute) -> np.ndarray:
     corners = attribute[np.asarray(faces)[face]]  # (H, W, 3, K)
     values = np.einsum("hwc,hwck->hwk", raster.bary, corners)
     return np.where(raster.mask[..., None], values, 0.0)
+
+
+def antialiased_raster(xy, depth, faces, shape, *, factor: int = 3, perspective: bool = True) -> Raster:
+    """:func:`rasterize`, plus each silhouette pixel's coverage from ``factor`` x ``factor`` sub-samples.
+
+    A pixel keeps the triangle at its centre. Where the mask changes between neighbours
+    (the silhouettes), the pixel is sampled on a ``factor`` x ``factor`` grid (odd, so its
+    middle sample is the centre): its coverage is the share of covered samples, and a pixel
+    whose centre misses the surface but whose area does not takes the covered sample nearest
+    its centre, so that the surface's radiance exists there to be weighted. Only triangles
+    whose box meets a silhouette pixel are rasterized again, so the cost grows with the
+    silhouette's length, not the image's area.
+    """
+    if factor < 1 or factor % 2 == 0:
+        raise ValueError(f"antialiased_raster(factor=...) must be an odd number >= 1; got {factor}.")
+    H, W = shape
+    centre = rasterize(xy, depth, faces, shape, perspective=perspective)
+    mask = centre.mask
+    padded = np.pad(mask, 1, mode="edge")
+    around = [padded[1 + dy:1 + dy + H, 1 + dx:1 + dx + W] for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    edge = np.any(around, axis=0) & ~np.all(around, axis=0)
+    coverage = mask.astype(float)
+    if factor == 1 or not edge.any():
+        return Raster(centre.face, centre.bary, centre.depth, coverage)
+    # Triangles whose pixel box meets a silhouette pixel (a summed-area table of the edge map).
+    faces = np.asarray(faces)
+    p = np.asarray(xy, float)[faces]
+    finite = np.all(np.isfinite(p), axis=(1, 2))  # a vertex behind the camera: never drawn
+    p = np.where(finite[:, None, None], p, 0.0)
+    lo, hi = np.floor(p.min(1)).astype(np.int64), np.floor(p.max(1)).astype(np.int64)
+    x0, x1 = np.clip(lo[:, 0], 0, W - 1), np.clip(hi[:, 0], -1, W - 1)
+    y0, y1 = np.clip(lo[:, 1], 0, H - 1), np.clip(hi[:, 1], -1, H - 1)
+    table = np.zeros((H + 1, W + 1), np.int64)
+    table[1:, 1:] = np.cumsum(np.cumsum(edge, 0), 1)
+    inside = (x1 >= x0) & (y1 >= y0)
+    hits = table[y1 + 1, x1 + 1] - table[y0, x1 + 1] - table[y1 + 1, x0] + table[y0, x0]
+    near = np.flatnonzero(finite & inside & (hits > 0))
+    fine_edge = np.repeat(np.repeat(edge, factor, 0), factor, 1)
+    fine = rasterize(np.asarray(xy, float) * factor, depth, faces[near], (H * factor, W * factor),
+                     perspective=perspective, where=fine_edge)
+    # (H, W, factor^2) sub-samples, ordered by distance from the pixel's centre.
+    offsets = [(dy, dx) for dy in range(factor) for dx in range(factor)]
+    middle = factor // 2
+    offsets.sort(key=lambda o: (o[0] - middle) ** 2 + (o[1] - middle) ** 2)
+    rows, cols = np.nonzero(edge)
+    sub_face = np.stack([fine.face[rows * factor + dy, cols * factor + dx] for dy, dx in offsets], -1)
+    covered = sub_face >= 0
+    coverage[rows, cols] = covered.mean(-1)
+    face, bary, z = centre.face.copy(), centre.bary.copy(), centre.depth.copy()
+    # Shade each partly covered pixel at the covered sample nearest the covered samples' centroid:
+    # radiance changes fast across a silhouette (Fresnel at grazing view), and the centroid stands
+    # for the covered part's mean better than the pixel's centre does.
+    fill = np.flatnonzero(covered.any(-1) & ~covered.all(-1))
+    grid = np.asarray(offsets, float)  # (S, 2) sample (row, column) within the pixel
+    weights = covered[fill].astype(float)
+    centroid = weights @ grid / weights.sum(-1, keepdims=True)
+    distance = ((grid[None] - centroid[:, None]) ** 2).sum(-1) + np.where(covered[fill], 0.0, np.inf)
+    nearest = np.asarray(offsets)[np.argmin(distance, -1)]  # ties: the one nearest the centre (offsets' order)
+    fy, fx = rows[fill] * factor + nearest[:, 0], cols[fill] * factor + nearest[:, 1]
+    face[rows[fill], cols[fill]] = near[fine.face[fy, fx]]
+    bary[rows[fill], cols[fill]] = fine.bary[fy, fx]
+    z[rows[fill], cols[fill]] = fine.depth[fy, fx]
+    return Raster(face, bary, z, coverage)

@@ -49,7 +49,7 @@ def white_lambertian_radiance(scene: Scene) -> np.ndarray:
                            shadow_map(scene.mesh, light, size=scene.shadow_map_size))
         arriving = np.clip(np.asarray(g.cosine), 0, None) * np.asarray(g.falloff) * np.asarray(g.visible)
         radiance = radiance + arriving[..., None] * np.asarray(light.color) * light.intensity
-    return np.asarray(radiance / np.pi * np.asarray(buffers.mask)[..., None], dtype=float)
+    return np.asarray(radiance / np.pi * np.asarray(buffers.coverage)[..., None], dtype=float)
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,5 +145,5 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     exitance[visible] = M
     exitance = exitance.reshape(buffers.mask.shape + (3,))
     cos_view = (buffers.normal * buffers.view).sum(-1)
-    L = np.asarray(diffuse_radiance(jnp.asarray(exitance), jnp.asarray(cos_view), eta)) * buffers.mask[..., None]
+    L = np.asarray(diffuse_radiance(jnp.asarray(exitance), jnp.asarray(cos_view), eta)) * buffers.coverage[..., None]
     return ReferenceFrame(L, buffers.mask, noise, samples, float(near))

@@ -95,6 +95,12 @@ class Prepared:
     stretch: np.ndarray
     schedule: object
     open_margin: int = 0  # unlit texels padded around the texture of an open surface (see diffusion_pass)
+    pixel_coverage: np.ndarray | None = None  # (H, W) share of each pixel the surface covers; None: the mask
+
+    @property
+    def coverage(self) -> np.ndarray:
+        """(H, W) share of each pixel the surface covers: what the frame's radiance is weighted by."""
+        return self.pixel_mask.astype(float) if self.pixel_coverage is None else self.pixel_coverage
 
 
 def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepared:
@@ -128,7 +134,8 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
     if schedule is not None and not is_closed(scene.mesh):
         reach = 3.0 * np.sqrt(float(np.max(plan.variances))) / texels.median_stretch()
         margin = int(min(np.ceil(reach), texels.size // 4))
-    return Prepared(texels, texel_lights, mask, uv, normal, view, pixel_lights, stretch, schedule, margin)
+    return Prepared(texels, texel_lights, mask, uv, normal, view, pixel_lights, stretch, schedule, margin,
+                    camera.coverage)
 
 
 def irradiance_pass(params: RenderParams, prep: Prepared):
@@ -177,7 +184,7 @@ def exitance_pass(params: RenderParams, prep: Prepared, plan: Plan, blurred):
 
 def camera_pass(params: RenderParams, prep: Prepared, plan: Plan, M, roughness: float, specular: float):
     dtype = M.dtype
-    mask = jnp.asarray(prep.pixel_mask, dtype)
+    coverage = jnp.asarray(prep.coverage, dtype)
     exitance = lookup(M, prep.pixel_uv, prep.texels.mask)
     cos_view = jnp.asarray((prep.pixel_normal * prep.pixel_view).sum(-1), dtype)
     lights = [g.astype(dtype) for g in prep.pixel_lights]
@@ -188,7 +195,7 @@ def camera_pass(params: RenderParams, prep: Prepared, plan: Plan, M, roughness: 
     if plan.on("specular"):
         L = L + specular_radiance(prep.pixel_normal, prep.pixel_view, lights, params.radiant,
                                   params.eta, roughness=roughness, weight=specular)
-    return L * mask[..., None]
+    return L * coverage[..., None]
 
 
 def render_image(params: RenderParams, prep: Prepared, plan: Plan, *, roughness: float = 0.35,

@@ -59,6 +59,22 @@ def test_stripe_light_converges_to_the_analytic_response_like_one_over_sqrt_n():
     assert errors[-1] < 0.03
 
 
+def test_pixel_errors_carry_no_period():
+    """Each pixel's error is its own: no pixel repeats another's pattern (issue 20: a 4 x 4 tile
+    of offsets showed as a grid with a 4-pixel period). On a uniformly lit plane seen from
+    above, the error of a pixel and of its neighbours 1-8 pixels away must be uncorrelated."""
+    buffers = camera_buffers(plane(200.0), TOP_VIEW)
+    M = _exitance(buffers, np.ones((96, 96, 3)), 8)[16:80, 16:80, 0]
+    error = M - M.mean()
+    assert error.std() > 1e-4 * M.mean()  # an estimate at 8 samples is not exact
+    n = error.size
+    bound = 4 / np.sqrt(n)  # a correlation estimated from n independent pairs has spread 1/sqrt(n)
+    for lag in range(1, 9):
+        for a, b in ((error[:, lag:], error[:, :-lag]), (error[lag:], error[:-lag])):
+            correlation = np.corrcoef(a.ravel(), b.ravel())[0, 1]
+            assert abs(correlation) < bound, (lag, correlation)
+
+
 def _tilted_plane(degrees):
     a = np.radians(degrees)
     rotation = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])

@@ -57,12 +57,14 @@ def test_radiance_across_a_shadow_edge_is_the_1d_integral_of_the_profile(name):
     # At the open rim half the light leaves: 0.1-0.7 % off with the unlit margin, 44-49 % without it.
     assert np.all(error[rim] < 0.01)
     # ... and the camera sees it: each pixel's radiance is the exit-Fresnel-weighted exitance
-    # of the closed form at the pixel's own surface point.
+    # of the closed form at the pixel's own surface point, times the share of the pixel the
+    # plane covers (1 inside, less on the pixels its edge crosses).
     L = np.asarray(camera_pass(params, prep, plan, M, 0.35, 0.0))[32]
     px = (prep.pixel_uv[32, :, 0] - 0.5) * 40.0  # the plane is 40 mm wide
     cos_view = (prep.pixel_normal[32] * prep.pixel_view[32]).sum(-1)
     M_px = E0 * (w[None] * _rectangle(px, np.zeros_like(px), np.sqrt(v))).sum(1)
     L_px = np.asarray(diffuse_radiance(jnp.asarray(M_px), jnp.asarray(cos_view), params.eta))
+    L_px = L_px * prep.coverage[32][:, None]
     lit = np.asarray(diffuse_radiance(jnp.asarray(E0 * w.sum(0)), 1.0, params.eta))
     assert np.all(np.abs(L - L_px).max(0) < 0.01 * lit)
 
