@@ -9,14 +9,19 @@ Tables:
 2. Sphere (stretched UVs): stretch correction on/off against a world-space brute-force sum
    over texel pairs (chord distance).
 3. One blur chain at 1024^2 x 3 channels x 6 Gaussians against scipy.ndimage.gaussian_filter.
+4. The example scenes' warm texture-space frames, and their blur chains against the memory-
+   bandwidth bound: the bytes a chain must move at least (each step's two passes read and
+   write the texture and its mask once) over the bandwidth of a large array copy measured in
+   the same run.
 
-Run: python benchmarks/render.py [--quick]
+Run: python benchmarks/render.py [--quick] [--only examples]
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 import time
 
@@ -29,10 +34,10 @@ from scipy.ndimage import gaussian_filter  # noqa: E402
 from scipy.signal import fftconvolve  # noqa: E402
 
 from jsss import dipole  # noqa: E402
-from jsss.render import parse_scene, plan_scene, prepare, render_params  # noqa: E402
+from jsss.render import load_scene, parse_scene, plan_scene, prepare, render_params  # noqa: E402
 from jsss.render.blur import blur_schedule, hierarchical_blur  # noqa: E402
 from jsss.render.profiles import choose_variances, shared_variances, full_profile  # noqa: E402
-from jsss.render.renderer import diffusion_pass, exitance_pass, irradiance_pass  # noqa: E402
+from jsss.render.renderer import diffusion_pass, exitance_pass, irradiance_pass, render_image  # noqa: E402
 
 sys.path.insert(0, ".")
 from benchmarks._timing import median_seconds  # noqa: E402
@@ -157,14 +162,55 @@ def blur_vs_scipy():
               f"{t / t_scipy:.2f} |", flush=True)
 
 
+def copy_bandwidth(megabytes: int = 256) -> float:
+    """Bytes per second of a large float32 array read and written once (x * 1.0001, jitted)."""
+    x = jnp.ones(megabytes * 2**20 // 4, jnp.float32)
+    scale = jax.jit(lambda a: a * 1.0001)
+    jax.block_until_ready(scale(x))
+    return 2 * x.nbytes / median_seconds(lambda: jax.block_until_ready(scale(x)), repeats=7)
+
+
+def example_frames():
+    print("\n## Example scenes: warm texture-space frames (float32) and the blur chain against the bandwidth bound\n")
+    bandwidth = copy_bandwidth()
+    print(f"Copy bandwidth (256 MB array, read + write): {bandwidth / 1e9:.1f} GB/s\n")
+    print("| scene | texture (with margin) | Gaussians | steps | chain moves | bound | chain | x bound | frame |")
+    print("|---|---|---|---|---:|---:|---:|---:|---:|")
+    for name in ("marble_sphere", "skin_backlit", "ketchup_plane"):
+        scene = load_scene(f"examples/{name}.toml")
+        plan = plan_scene(scene, method="texture-space")
+        prep = prepare(scene, plan)
+        params = render_params(scene, plan, dtype=jnp.float32)
+        material = scene.material
+        E = jax.jit(lambda p: irradiance_pass(p, prep))(params)
+        chain = jax.jit(lambda p, e: diffusion_pass(p, prep, plan, e))
+        frame = jax.jit(lambda p: render_image(p, prep, plan, roughness=material.roughness,
+                                               specular=material.specular))
+        jax.block_until_ready((chain(params, E), frame(params)))
+        t_chain = median_seconds(lambda: jax.block_until_ready(chain(params, E)), repeats=5)
+        t_frame = median_seconds(lambda: jax.block_until_ready(frame(params)), repeats=5)
+        size = plan.texture_size + 2 * prep.open_margin
+        texels = size * (plan.texture_size if prep.texels.wrap_u else size)
+        moved = prep.schedule.n_steps * 2 * 2 * texels * (3 + 1) * 4  # steps x passes x (read, write) x RGB + mask
+        bound = moved / bandwidth
+        print(f"| {name} | {size}^2 | {len(plan.variances)} | {prep.schedule.n_steps} | {moved / 1e6:.0f} MB | "
+              f"{1000 * bound:.0f} ms | {1000 * t_chain:.0f} ms | {t_chain / bound:.1f} | {1000 * t_frame:.0f} ms |",
+              flush=True)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="skip the 512^2 rows")
+    parser.add_argument("--only", choices=("examples",), help="run one table only")
     args = parser.parse_args()
-    print(f"# benchmarks/render.py, {time.strftime('%Y-%m-%d')}, {jax.devices()[0].platform}")
-    plane_table(args.quick)
-    sphere_table()
-    blur_vs_scipy()
+    load = os.getloadavg()[0]
+    print(f"# benchmarks/render.py, {time.strftime('%Y-%m-%d')}, {jax.devices()[0].platform}, "
+          f"{os.cpu_count()} cores, load {load:.1f}")
+    if args.only != "examples":
+        plane_table(args.quick)
+        sphere_table()
+        blur_vs_scipy()
+    example_frames()
 
 
 if __name__ == "__main__":

@@ -53,59 +53,110 @@ def kernel(taps: int = 7) -> tuple[np.ndarray, np.ndarray]:
 
 @functools.lru_cache(maxsize=32)
 def _variance_table(taps: int, max_spacing: int) -> tuple[np.ndarray, np.ndarray]:
-    """Spacing s and the kernel's exact variance (texels^2) at every breakpoint up to ``max_spacing``."""
+    """Spacing s and the kernel's exact variance (texels^2) on a grid that holds every breakpoint.
+
+    The breakpoints are where a tap crosses a texel, s = n / |k|, so all lie on multiples of
+    1 / lcm(1..half); between grid points the variance is linear in s.
+    """
     k, w = kernel(taps)
     half = int(k.max())
-    s = np.unique(np.concatenate([np.arange(0, max_spacing * m + 1) / m for m in range(1, half + 1)]))
+    per_texel = math.lcm(*range(1, half + 1))
+    s = np.arange(max_spacing * per_texel + 1) / per_texel
     x = np.abs(k)[None, :] * s[:, None]
-    n = np.floor(x)
-    variance = (w[None, :] * (n**2 + (2 * n + 1) * (x - n))).sum(1)
+    n = np.floor(x + 1e-9)  # s = n / |k| exactly: the tap sits on texel n
+    variance = (w[None, :] * (n**2 + (2 * n + 1) * np.maximum(x - n, 0.0))).sum(1)
     return s, variance
+
+
+@functools.lru_cache(maxsize=32)
+def _inverse_lookup(taps: int, max_spacing: int):
+    """For :func:`spacing_for_variance`: cells uniform in sqrt(variance), each holding at most one
+    grid point, and per cell the last grid point at or below the cell's start."""
+    s, variance = _variance_table(taps, max_spacing)
+    root = np.sqrt(variance)
+    cell = 0.5 * float(np.min(np.diff(root)))
+    starts = np.arange(int(root[-1] / cell) + 2) * cell
+    first = np.clip(np.searchsorted(variance, starts**2, side="right") - 1, 0, len(s) - 2)
+    return s, variance, cell, first
 
 
 def spacing_for_variance(variance, *, taps: int = 7, max_spacing: int = 1024):
     """Tap spacing [texels] whose interpolated kernel has exactly ``variance`` [texels^2].
 
-    Variances beyond the table's end are clamped to ``max_spacing``.
+    Variances beyond the table's end are clamped to ``max_spacing``. The inverse is the
+    piecewise-linear interpolant through the breakpoints, found without a search: the cell of
+    sqrt(variance) gives the grid point to within one either way, three comparisons settle
+    it (``jnp.interp``'s binary search over the 3000 points took a third of a blur step).
     """
-    s, v = _variance_table(int(taps), int(max_spacing))
+    s, v, cell, first = _inverse_lookup(int(taps), int(max_spacing))
     variance = jnp.asarray(variance)
-    return jnp.interp(variance, jnp.asarray(v, variance.dtype), jnp.asarray(s, variance.dtype))
+    dtype = variance.dtype
+    table = jnp.asarray(v, dtype)
+    clamped = jnp.clip(variance, 0.0, float(v[-1]))
+    c = jnp.clip(jnp.floor(jnp.sqrt(clamped) / cell).astype(jnp.int32), 0, len(first) - 1)
+    lo = jnp.asarray(first, jnp.int32)[c]
+    count = sum((clamped >= table[jnp.clip(lo + i, 0, len(v) - 1)]).astype(jnp.int32) for i in range(3))
+    j = jnp.clip(lo - 1 + count, 0, len(v) - 2)
+    v0, v1 = table[j], table[j + 1]
+    step = float(s[1] - s[0])
+    fraction = jnp.clip((jnp.clip(variance, 0.0, float(v[-1])) - v0) / (v1 - v0), 0.0, 1.0)
+    return (j.astype(dtype) + fraction) * step
 
 
-def _lerp_along(values, positions, axis: int, wrap: bool):
-    """Linear interpolation of ``values`` (H, W, C) at fractional ``positions`` (H, W) along ``axis``.
+def _gathered_lerp(values, axis: int, wrap: bool):
+    """For per-texel positions: ``read(positions)`` is ``values`` (H, W, C) linearly interpolated
+    at fractional ``positions`` (H, W) along ``axis`` (zeros, or the period, beyond the edge).
 
-    Reads are one flat row gather each (``take_along_axis`` here compiles to a gather per
-    channel and slice, an order of magnitude slower on CPU).
+    Along rows (``axis = 1``) the two texels a tap spans are neighbours in memory: one gather
+    of a (2, C) window per texel reads both, from ``values`` padded by a column on each side
+    (zeros) or by the first column after the last (wrap). Along columns they are a row apart:
+    two gathers of C values each. (``take_along_axis`` compiles to a gather per channel and
+    slice, an order of magnitude slower on CPU.)
     """
     H, W, C = values.shape
     n = values.shape[axis]
-    i0 = jnp.floor(positions)
-    f = (positions - i0)[..., None]
-    i0 = i0.astype(jnp.int32)
-    i1 = i0 + 1
-    if wrap:
-        i0, i1 = i0 % n, i1 % n
-        inside0 = inside1 = 1.0
-    else:
-        inside0 = ((i0 >= 0) & (i0 < n))[..., None].astype(values.dtype)
-        inside1 = ((i1 >= 0) & (i1 < n))[..., None].astype(values.dtype)
-        i0, i1 = jnp.clip(i0, 0, n - 1), jnp.clip(i1, 0, n - 1)
-    flat = values.reshape(H * W, C)
     if axis == 1:
-        rows = jnp.arange(H, dtype=jnp.int32)[:, None] * W
-        v0, v1 = flat[rows + i0], flat[rows + i1]
+        source = jnp.concatenate([values, values[:, :1]], 1) if wrap else jnp.pad(values, ((0, 0), (1, 1), (0, 0)))
+        width = source.shape[1]
+        flat = source.reshape(H * width, C)
+        rows = jnp.arange(H, dtype=jnp.int32)[:, None] * width
     else:
+        flat = values.reshape(H * W, C)
         cols = jnp.arange(W, dtype=jnp.int32)[None, :]
-        v0, v1 = flat[i0 * W + cols], flat[i1 * W + cols]
-    return (1 - f) * v0 * inside0 + f * v1 * inside1
+
+    def read(positions):
+        i0 = jnp.floor(positions)
+        f = (positions - i0)[..., None]
+        i0 = i0.astype(jnp.int32)
+        i1 = i0 + 1
+        if wrap:
+            inside0 = inside1 = 1.0
+        else:
+            inside0 = ((i0 >= 0) & (i0 < n))[..., None].astype(values.dtype)
+            inside1 = ((i1 >= 0) & (i1 < n))[..., None].astype(values.dtype)
+        if axis == 1:
+            # Window start in the padded row: texel i0 sits at i0 (wrap) or i0 + 1 (zero pad);
+            # texels far outside land on a pad or edge texel whose weight is zero.
+            start = i0 % n if wrap else jnp.clip(i0, -1, n - 1) + 1
+            window = jax.vmap(lambda at: jax.lax.dynamic_slice(flat, (at, jnp.int32(0)), (2, C)))(
+                (rows + start).reshape(-1).astype(jnp.int32))
+            window = window.reshape(H, W, 2, C)
+            v0, v1 = window[..., 0, :], window[..., 1, :]
+        else:
+            if wrap:
+                i0, i1 = i0 % n, i1 % n
+            else:
+                i0, i1 = jnp.clip(i0, 0, n - 1), jnp.clip(i1, 0, n - 1)
+            v0, v1 = flat[i0 * W + cols], flat[i1 * W + cols]
+        return (1 - f) * v0 * inside0 + f * v1 * inside1
+
+    return read
 
 
 def _shifted_lerp(values, axis: int, wrap: bool):
     """For one offset shared by every texel: ``read(x)`` is ``values`` (H, W, C) linearly
     interpolated at ``i + x`` along ``axis`` (x a traced scalar), its two reads slices at a
-    traced start (``dynamic_slice``) instead of :func:`_lerp_along`'s per-texel gathers, with
+    traced start (``dynamic_slice``) instead of :func:`_gathered_lerp`'s per-texel gathers, with
     the same integer part and fraction (and zeros, or the period, beyond the edge)."""
     n = values.shape[axis]
     if wrap:  # periodic: read from two copies side by side
@@ -132,22 +183,57 @@ def _shifted_lerp(values, axis: int, wrap: bool):
 
 def _blur_pass(texture, mask, spacing, axis: int, taps: int, wrap: bool):
     """One normalised 1D pass. ``spacing`` per texel (H, W) reads each tap by gathers; one
-    scalar spacing for every texel (a uniform stretch) reads it by shifted slices."""
+    scalar spacing for every texel (a uniform stretch) reads it by shifted slices.
+
+    The taps are summed by a ``lax.scan`` rather than an unrolled sum: XLA:CPU drops
+    ``optimization_barrier`` and fuses an unrolled sum into its consumers, so the normalisation
+    recomputed every tap's reads once for the numerator and once for the weight, and the
+    spacing's table search inside every gather. A loop's carry is materialised between taps:
+    one pass on 512^2 x 4 went from 50 to 7 ms.
+    """
     offsets, weights = kernel(taps)
     stacked = jnp.concatenate([texture * mask[..., None], mask[..., None]], axis=-1)
     if jnp.ndim(spacing) == 0:
-        read = _shifted_lerp(stacked, axis, wrap)
-        taps_read = [read(float(k) * spacing) for k in offsets]
+        shifted = _shifted_lerp(stacked, axis, wrap)
+
+        def read(k):  # the tap k spacings away, for every texel at once
+            return shifted(k * spacing)
     else:
         index = jnp.arange(texture.shape[axis], dtype=spacing.dtype)
         base = index[:, None] if axis == 0 else index[None, :]
-        taps_read = [_lerp_along(stacked, base + float(k) * spacing, axis, wrap) for k in offsets]
-    total = 0.0
-    for w, tap in zip(weights, taps_read):
-        total = total + float(w) * tap
+        gathered = _gathered_lerp(stacked, axis, wrap)
+
+        def read(k):
+            return gathered(base + k * spacing)
+
+    def tap(total, offset_weight):
+        offset, weight = offset_weight
+        return total + weight * read(offset), None
+
+    dtype = texture.dtype
+    total, _ = jax.lax.scan(tap, jnp.zeros_like(stacked), (jnp.asarray(offsets, dtype), jnp.asarray(weights, dtype)))
     numerator, weight = total[..., :-1], total[..., -1:]
     has = weight > 1e-12
     return jnp.where(has, numerator / jnp.where(has, weight, 1.0), 0.0) * mask[..., None]
+
+
+def _per_axis(stretch, shape):
+    """``stretch`` as (u, v) lengths [mm]: each one scalar (uniform along that axis's texels) or an
+    (H, W) map. Accepts a (2,) pair, an (H, W, 2) or (H, W, 1) map, or such a (u, v) tuple."""
+    if isinstance(stretch, tuple):
+        return stretch
+    if jnp.shape(stretch) == (2,):
+        return stretch[0], stretch[1]
+    stretch = jnp.broadcast_to(stretch, tuple(shape) + (2,))
+    return stretch[..., 0], stretch[..., 1]
+
+
+def _spacing(variance, length, size: int, taps: int):
+    """Tap spacing [texels] for ``variance`` [mm^2] at texel ``length`` [mm] (scalar or map; 0 off the mask)."""
+    if jnp.ndim(length) == 0:
+        return spacing_for_variance(variance / length**2, taps=taps, max_spacing=size)
+    safe = jnp.where(length > 0, length, 1.0)
+    return jnp.where(length > 0, spacing_for_variance(variance / safe**2, taps=taps, max_spacing=size), 0.0)
 
 
 def blur_step(texture, mask, stretch, variance, *, taps: int = 7, wrap_u: bool = False):
@@ -158,30 +244,20 @@ def blur_step(texture, mask, stretch, variance, *, taps: int = 7, wrap_u: bool =
     texture : array, shape (H, W, C)
     mask : array, shape (H, W)
         1 on valid texels, 0 elsewhere.
-    stretch : array, shape (H, W, 2) or (2,)
-        World length of one texel step along u and v [mm]. One pair for every texel (shape
-        (2,), a plane) reads each tap as a shifted slice instead of the per-texel gathers a
-        varying stretch needs, with the same result (a step on 768^2 x 3 on 2 CPU cores: 213
-        against 345 ms).
+    stretch : array, shape (H, W, 2) or (2,), or a tuple (u, v)
+        World length of one texel step along u and v [mm]: per texel, one pair for every texel
+        (a plane), or per axis, each a scalar or an (H, W) map (a sphere's v is uniform, its u
+        is not). An axis whose length is one scalar reads each tap as a shifted slice instead of
+        the per-texel gathers a varying length needs, with the same result (one pass on
+        512^2 x 4 on 2 CPU cores: 3 against 12 ms).
     variance : scalar [mm^2]
     """
     dtype = texture.dtype
     mask = jnp.asarray(mask, dtype)
-    stretch = jnp.asarray(stretch, dtype)
-    if stretch.shape == (2,):
-        spacing = spacing_for_variance(variance / stretch**2, taps=taps, max_spacing=max(texture.shape[:2]))
-        out = _blur_pass(texture, mask, spacing[0], 1, taps, wrap_u)
-        return _blur_pass(out, mask, spacing[1], 0, taps, False)
-    stretch = jnp.broadcast_to(stretch, mask.shape + (2,))
-    safe = jnp.where(stretch > 0, stretch, 1.0)
+    u, v = (jnp.asarray(length, dtype) for length in _per_axis(stretch, mask.shape))
     size = max(texture.shape[:2])
-    spacing = spacing_for_variance(variance / safe**2, taps=taps, max_spacing=size)
-    # Materialise the spacing: otherwise XLA fuses the table search into every tap's gather.
-    spacing = jax.lax.optimization_barrier(jnp.where(stretch > 0, spacing, 0.0))
-    out = _blur_pass(texture, mask, spacing[..., 0], 1, taps, wrap_u)
-    # ... and the first pass's result, which XLA would otherwise recompute inside each gather of the second.
-    out = jax.lax.optimization_barrier(out)
-    return _blur_pass(out, mask, spacing[..., 1], 0, taps, False)
+    out = _blur_pass(texture, mask, _spacing(variance, u, size, taps), 1, taps, wrap_u)
+    return _blur_pass(out, mask, _spacing(variance, v, size, taps), 0, taps, False)
 
 
 class BlurSchedule:
@@ -249,23 +325,35 @@ def hierarchical_blur(texture, mask, stretch, variances, schedule: BlurSchedule,
 
 
 def uniform_stretch(stretch, mask):
-    """``stretch`` as one NumPy (2,) pair where it is the same on every valid texel (a plane; what
-    invalid texels hold does not matter, they neither give nor receive light), else as it is.
-    Only concrete stretch maps are looked at (geometry is fixed, also during a fit)."""
+    """``stretch`` with every axis that has one length on all valid texels made a scalar: a NumPy
+    (2,) pair where both do (a plane), a (u, v) tuple where one does (a sphere's v), else as it is.
+    "One length" allows a relative spread of 1e-9 (rounding in the baked map). What invalid texels
+    hold does not matter (they neither give nor receive light). Only concrete
+    stretch maps are looked at (geometry is fixed, also during a fit)."""
     if not is_concrete((stretch, mask)):
         return stretch
-    values = np.asarray(stretch, float)
-    if values.shape == (2,):
+    if isinstance(stretch, tuple) or np.shape(stretch) == (2,):
         return stretch
+    values = np.asarray(stretch)
     valid = np.broadcast_to(np.asarray(mask) > 0, values.shape[:-1])
-    inside = values[valid]
-    if inside.size and np.all(inside > 0) and np.all(inside == inside[0]):
-        return np.broadcast_to(inside[0], (2,)).astype(np.asarray(stretch).dtype)  # (..., 1): isotropic
+    values = np.broadcast_to(values, valid.shape + (2,))
+    axes = []
+    for axis in range(2):
+        inside = values[..., axis][valid]
+        # Equal to rounding: baked lengths along a sphere's v differ by 1e-15 between texels.
+        uniform = inside.size and np.all(inside > 0) and np.ptp(inside) <= 1e-9 * inside[0]
+        axes.append(np.asarray(inside[0], values.dtype) if uniform else values[..., axis])
+    if all(a.ndim == 0 for a in axes):
+        return np.stack(axes)
+    if any(a.ndim == 0 for a in axes):
+        return tuple(axes)
     return stretch
 
 
 @functools.partial(jax.jit, static_argnames=("substeps", "taps", "wrap_u"))
 def _chain(texture, mask, stretch, variances, first_variance_ratio, *, substeps, taps, wrap_u):
+    # ``stretch``: a (2,) pair, an (H, W, 2) map or a (u, v) tuple (see blur_step); its form is
+    # part of the compiled program's shape.
     # Jitted on its own with the arrays as arguments: one compiled chain per texture size and
     # schedule shape, reused by every frame and fit (a closure would bake the texture in).
     targets, outputs = _targets(variances, substeps, first_variance_ratio)

@@ -92,7 +92,7 @@ class Prepared:
     pixel_normal: np.ndarray
     pixel_view: np.ndarray
     pixel_lights: tuple
-    stretch: np.ndarray
+    stretch: np.ndarray | tuple  # (H, W, 2), a (2,) pair, or a (u, v) tuple of scalars and maps
     schedule: object
     open_margin: int = 0  # unlit texels padded around the texture of an open surface (see diffusion_pass)
     pixel_coverage: np.ndarray | None = None  # (H, W) share of each pixel the surface covers; None: the mask
@@ -125,8 +125,9 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
         stretch = texels.stretch
     else:  # uniform: the median texel length everywhere
         stretch = np.where(texels.mask[..., None], texels.median_stretch(), 0.0)
-    # One (2,) pair where every valid texel has the same stretch (a plane): the blur then reads
-    # its taps as slices, not gathers (decided here: in the jitted passes the map is traced).
+    # A scalar per axis whose texels all have one length (a plane's both, a sphere's v): the blur
+    # then reads that axis's taps as slices, not gathers (decided here: in the jitted passes the
+    # map is traced).
     stretch = uniform_stretch(stretch, texels.mask)
     schedule = blur_schedule(np.asarray(plan.variances), texels.median_stretch(), max_ratio=plan.max_ratio) \
         if plan.on("diffusion") else None
@@ -158,14 +159,16 @@ def diffusion_pass(params: RenderParams, prep: Prepared, plan: Plan, E):
     dtype = E.dtype
     if not plan.on("diffusion"):
         return jnp.broadcast_to(E, (len(plan.variances),) + E.shape)
-    mask, stretch, m = jnp.asarray(prep.texels.mask, dtype), jnp.asarray(prep.stretch, dtype), prep.open_margin
+    mask, m = jnp.asarray(prep.texels.mask, dtype), prep.open_margin
+    stretch = jax.tree.map(lambda a: jnp.asarray(a, dtype), prep.stretch)  # a (2,) pair, a map or a (u, v) tuple
     if m:
         rows = (m, m)
         cols = (0, 0) if prep.texels.wrap_u else (m, m)
         E = jnp.pad(E, (rows, cols, (0, 0)))
         mask = jnp.pad(mask, (rows, cols), constant_values=1.0)
-        if stretch.ndim == 3:  # a (2,) pair holds for the margin too
-            stretch = jnp.pad(stretch, (rows, cols, (0, 0)), mode="edge")
+        # Maps are extended by their edge; a scalar length (or a (2,) pair) holds for the margin too.
+        stretch = jax.tree.map(lambda a: jnp.pad(a, (rows, cols) + ((0, 0),) * (a.ndim - 2), mode="edge")
+                               if a.ndim >= 2 else a, stretch)
     blurred = hierarchical_blur(E, mask, stretch, params.variances, prep.schedule, taps=plan.taps,
                                 wrap_u=prep.texels.wrap_u)
     if m:

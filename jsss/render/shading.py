@@ -43,6 +43,9 @@ def diffuse_radiance(exitance, cos_view, eta):
     return exitance * exit_lobe(jnp.asarray(cos_view)[..., None], eta)
 
 
+ALBEDO_NODES = 129  # cosines on which the single-scattering albedo is tabulated per frame
+
+
 def single_scattering(medium, normals, view_dirs, light_geometry, radiant):
     r"""Single-scattered radiance toward the eye and exitance (both (..., C)), summed over lights.
 
@@ -56,10 +59,16 @@ def single_scattering(medium, normals, view_dirs, light_geometry, radiant):
     :math:`\rho^{(1)}` of :mod:`jsss.single_scattering` (HG with ``g = 0`` on the reduced
     coefficients, the model the dipole's medium is given in). It leaves within a mean free
     path of where light entered, so both are evaluated at the pixel's own point.
+
+    :math:`\rho^{(1)}` depends on :math:`\cos\theta_l` alone: it is evaluated on
+    ``ALBEDO_NODES`` cosines and interpolated linearly (within 2e-5 of its maximum for the
+    Jensen materials, where the 16-node quadrature per pixel took 200 ms of a 320 x 240 frame).
     """
     n = jnp.asarray(normals, radiant.dtype)
     v = jnp.asarray(view_dirs, radiant.dtype)
     cos_o = jnp.clip((n * v).sum(-1), 0.0, 1.0)
+    nodes = jnp.linspace(0.0, 1.0, ALBEDO_NODES, dtype=radiant.dtype)
+    albedo_table = single_scattering_albedo(medium, nodes, nodes=16)  # (ALBEDO_NODES, C)
     radiance, exitance = 0.0, 0.0
     for i, g in enumerate(light_geometry):
         to_light = jnp.asarray(g.to_light, radiant.dtype)
@@ -67,7 +76,12 @@ def single_scattering(medium, normals, view_dirs, light_geometry, radiant):
         arriving = (cos_i * jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None] * radiant[i]
         tangential = (to_light * v).sum(-1) - cos_i * cos_o
         radiance = radiance + single_scattering_brdf_from_cosines(medium, cos_i, cos_o, tangential) * arriving
-        exitance = exitance + single_scattering_albedo(medium, cos_i, nodes=16) * arriving
+        position = cos_i * (ALBEDO_NODES - 1)
+        below = jnp.clip(jnp.floor(position), 0, ALBEDO_NODES - 2)
+        fraction = (position - below)[..., None]
+        below = below.astype(jnp.int32)
+        albedo = (1 - fraction) * albedo_table[below] + fraction * albedo_table[below + 1]
+        exitance = exitance + albedo * arriving
     return radiance, exitance
 
 
