@@ -157,3 +157,26 @@ def testuniform_stretch_slices_equal_the_per_texel_gathers_and_their_gradients(w
     isotropic = np.where(mask[..., None] > 0, 0.3, 0.0)  # one length per texel, (H, W, 1), as a plane's
     assert np.asarray(uniform_stretch(isotropic, mask)).tolist() == [0.3, 0.3]
     assert np.abs(np.asarray(chain) - np.asarray(gathered)).max() < 1e-12
+
+
+def test_one_uniform_axis_reads_by_slices_and_equals_the_per_texel_map():
+    """A sphere's v has one length on every texel (to rounding), its u does not: the chain then
+    reads v's taps as slices and u's by gathers. Same blur and gradient as the full map."""
+    rng = np.random.default_rng(7)
+    tex = jnp.asarray(rng.uniform(size=(S, S + 5, 3)))
+    mask = (rng.uniform(size=(S, S + 5)) > 0.1).astype(float)
+    u = 0.2 + 0.3 * np.sin(np.linspace(0.1, 3.0, S))[:, None] * np.ones(S + 5)  # varies by row, like a sphere
+    v = np.full(u.shape, 0.25) * (1 + 1e-15 * rng.standard_normal(u.shape))  # equal to rounding
+    per_texel = np.stack([u, v], -1)
+    axes = uniform_stretch(per_texel, mask)
+    assert isinstance(axes, tuple) and axes[0].shape == u.shape and axes[1].shape == ()
+    for variance in (0.05, 2.0, 40.0):
+        mixed = blur_step(tex, mask, axes, variance, wrap_u=True)
+        gathered = blur_step(tex, mask, jnp.asarray(per_texel), variance, wrap_u=True)
+        assert np.abs(np.asarray(mixed) - np.asarray(gathered)).max() < 1e-12, variance
+
+        def loss(var, stretch):
+            return jnp.sum(blur_step(tex, mask, stretch, var, wrap_u=True) * tex)
+
+        assert float(jax.grad(loss)(variance, axes)) == pytest.approx(
+            float(jax.grad(loss)(variance, jnp.asarray(per_texel))), rel=1e-9)
