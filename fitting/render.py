@@ -249,7 +249,7 @@ def _texture_data(scene: Scene, plan, dtype, blur_dtype=jnp.float32) -> _Texture
                         jnp.asarray(_profile_radii(plan.variances), dtype),
                         exit_lobe(cos_view[..., None], params.eta), jnp.asarray(single_radiance, dtype),
                         jnp.asarray(single_exitance, dtype), jnp.asarray(spec, dtype),
-                        jnp.asarray(prep.coverage, dtype))
+                        jnp.asarray(prep.pixel_coverage, dtype))
 
 
 def _texture_radiance(medium, data: _TextureData, profile_model: str, g: float):

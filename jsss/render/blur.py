@@ -99,7 +99,7 @@ def spacing_for_variance(variance, *, taps: int = 7, max_spacing: int = 1024):
     j = jnp.clip(lo - 1 + count, 0, len(v) - 2)
     v0, v1 = table[j], table[j + 1]
     step = float(s[1] - s[0])
-    fraction = jnp.clip((jnp.clip(variance, 0.0, float(v[-1])) - v0) / (v1 - v0), 0.0, 1.0)
+    fraction = jnp.clip((clamped - v0) / (v1 - v0), 0.0, 1.0)
     return (j.astype(dtype) + fraction) * step
 
 

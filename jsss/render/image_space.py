@@ -31,8 +31,8 @@ importance samples land, combined with the balance heuristic
 (Kronecker) point set, shifted by its own random offset at every pixel (a Cranley-Patterson
 rotation per pixel: each pixel keeps the point set's even coverage, and the errors of
 neighbouring pixels are independent). An earlier 4 x 4 tile of offsets repeated every
-fourth pixel and showed as a regular grid over the whole object. Three colour channels share one set of samples:
-the importance density is the mixture of the three channels' densities, each channel
+fourth pixel and showed as a regular grid over the whole object. Three colour channels
+share one set of samples: the importance density is the mixture of the three channels' densities, each channel
 drawn in proportion to its albedo.
 
 Rejected samples (they count as zero, keeping the estimate unbiased for the visible
@@ -220,8 +220,8 @@ def camera_buffers(mesh: Mesh, camera: PerspectiveView) -> CameraBuffers:
 
     Normals are turned towards the camera (a surface seen from behind, like an open fin, is
     shaded from the side we see). Silhouette pixels carry their coverage (3 x 3 sub-samples,
-    :func:`~jsss.render.raster.antialiased_raster`); one whose centre misses the surface is
-    shaded at the covered sub-sample nearest its centre, and every frame's radiance is
+    :func:`~jsss.render.raster.antialiased_raster`); a partly covered pixel is shaded at the
+    covered sub-sample nearest the covered part's centroid, and every frame's radiance is
     weighted by the coverage, so edges are filtered instead of stair-stepped.
     """
     xy, z = camera.project(mesh.vertices)

@@ -218,11 +218,12 @@ def surface_attributes(raster: Raster, faces, attribute) -> np.ndarray:
 def antialiased_raster(xy, depth, faces, shape, *, factor: int = 3, perspective: bool = True) -> Raster:
     """:func:`rasterize`, plus each silhouette pixel's coverage from ``factor`` x ``factor`` sub-samples.
 
-    A pixel keeps the triangle at its centre. Where the mask changes between neighbours
-    (the silhouettes), the pixel is sampled on a ``factor`` x ``factor`` grid (odd, so its
-    middle sample is the centre): its coverage is the share of covered samples, and a pixel
-    whose centre misses the surface but whose area does not takes the covered sample nearest
-    its centre, so that the surface's radiance exists there to be weighted. Only triangles
+    A fully covered pixel keeps the triangle at its centre. Where the mask changes between
+    neighbours (the silhouettes), the pixel is sampled on a ``factor`` x ``factor`` grid (odd,
+    so its middle sample is the centre): its coverage is the share of covered samples, and a
+    partly covered pixel (its centre covered or not) takes the covered sample nearest the
+    covered samples' centroid, so that the surface's radiance exists there to be weighted and
+    stands for the covered part. Only triangles
     whose box meets a silhouette pixel are rasterized again, so the cost grows with the
     silhouette's length, not the image's area.
     """

@@ -88,6 +88,7 @@ class Prepared:
     texels: TexelGeometry
     texel_lights: tuple
     pixel_mask: np.ndarray
+    pixel_coverage: np.ndarray  # (H, W) share of each pixel the surface covers: the frame's radiance is weighted by it
     pixel_uv: np.ndarray
     pixel_normal: np.ndarray
     pixel_view: np.ndarray
@@ -95,12 +96,6 @@ class Prepared:
     stretch: np.ndarray | tuple  # (H, W, 2), a (2,) pair, or a (u, v) tuple of scalars and maps
     schedule: object
     open_margin: int = 0  # unlit texels padded around the texture of an open surface (see diffusion_pass)
-    pixel_coverage: np.ndarray | None = None  # (H, W) share of each pixel the surface covers; None: the mask
-
-    @property
-    def coverage(self) -> np.ndarray:
-        """(H, W) share of each pixel the surface covers: what the frame's radiance is weighted by."""
-        return self.pixel_mask.astype(float) if self.pixel_coverage is None else self.pixel_coverage
 
 
 def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepared:
@@ -135,8 +130,8 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
     if schedule is not None and not is_closed(scene.mesh):
         reach = 3.0 * np.sqrt(float(np.max(plan.variances))) / texels.median_stretch()
         margin = int(min(np.ceil(reach), texels.size // 4))
-    return Prepared(texels, texel_lights, mask, uv, normal, view, pixel_lights, stretch, schedule, margin,
-                    camera.coverage)
+    return Prepared(texels, texel_lights, mask, camera.coverage, uv, normal, view, pixel_lights, stretch, schedule,
+                    margin)
 
 
 def irradiance_pass(params: RenderParams, prep: Prepared):
@@ -187,7 +182,7 @@ def exitance_pass(params: RenderParams, prep: Prepared, plan: Plan, blurred):
 
 def camera_pass(params: RenderParams, prep: Prepared, plan: Plan, M, roughness: float, specular: float):
     dtype = M.dtype
-    coverage = jnp.asarray(prep.coverage, dtype)
+    coverage = jnp.asarray(prep.pixel_coverage, dtype)
     exitance = lookup(M, prep.pixel_uv, prep.texels.mask)
     cos_view = jnp.asarray((prep.pixel_normal * prep.pixel_view).sum(-1), dtype)
     lights = [g.astype(dtype) for g in prep.pixel_lights]

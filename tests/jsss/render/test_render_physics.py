@@ -64,7 +64,7 @@ def test_radiance_across_a_shadow_edge_is_the_1d_integral_of_the_profile(name):
     cos_view = (prep.pixel_normal[32] * prep.pixel_view[32]).sum(-1)
     M_px = E0 * (w[None] * _rectangle(px, np.zeros_like(px), np.sqrt(v))).sum(1)
     L_px = np.asarray(diffuse_radiance(jnp.asarray(M_px), jnp.asarray(cos_view), params.eta))
-    L_px = L_px * prep.coverage[32][:, None]
+    L_px = L_px * prep.pixel_coverage[32][:, None]
     lit = np.asarray(diffuse_radiance(jnp.asarray(E0 * w.sum(0)), 1.0, params.eta))
     assert np.all(np.abs(L - L_px).max(0) < 0.01 * lit)
 
