@@ -72,7 +72,7 @@ def _progress(done, total, label, stream=sys.stderr):
 
 
 _ROW_KEYS = ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance", "mean_free_path_mm",
-             "rel_residual", "chi2_reduced", "converged", "quality")
+             "rel_residual", "chi2_reduced", "converged", "quality", "field_diffusion_lengths")
 
 
 def _fit_row(job, options) -> dict:
@@ -82,7 +82,7 @@ def _fit_row(job, options) -> dict:
     a Dask worker (where the compiled fit and the grid stay warm between images)."""
     _enable_x64()
     measurement, reference, dark, overrides = job
-    row = {"file": str(measurement), "status": "ok", "error": ""}
+    row = {"file": str(measurement), "status": "ok", "error": "", "warnings": ""}
     try:
         result = _load_and_fit(measurement, reference, pixel_mm=overrides.get("pixel_mm", options["pixel_mm"]),
                                eta=overrides.get("eta", options["eta"]), dark=dark,
@@ -94,6 +94,7 @@ def _fit_row(job, options) -> dict:
         for key in _ROW_KEYS:
             for ch, value in zip(table["channels"], table[key]):
                 row[f"{key}_{ch}"] = value
+        row["warnings"] = "; ".join(result.warnings)
     except Exception as error:  # recorded in the table, never dropped
         row.update(status="failed", error=f"{type(error).__name__}: {error}")
     return row

@@ -281,6 +281,8 @@ def _check_export_arguments(args):
 def _report(result, args, truth=None, extra=None, stem="fitted"):
     table = {**result.table(), **(extra or {})}
     _warn_quality(table)
+    for message in result.warnings:
+        print(f"{PROG}: warning: {message}", file=sys.stderr)
     if args.plot:
         _plot(result, args.plot)
     for line in _write_exports(result, args, stem):

@@ -12,7 +12,7 @@ import numpy as np
 
 from fitting.medium import MediumFit, fit_medium
 
-from .checks import check_measurement, fit_quality
+from .checks import check_measurement, field_diffusion_lengths, field_warnings, fit_quality
 from .profile import (Calibrated, RadialProfile, beam_center, beam_sigma, beam_window_mm, calibrate, channel_sums,
                       check_image, radial_profile)
 
@@ -32,6 +32,24 @@ class MeasurementFit:
     model: str = "dipole"
     g: float = 0.0
     view_angle_deg: float | None = 0.0
+    field_mm: float = np.inf
+
+    @property
+    def field_diffusion_lengths(self) -> np.ndarray:
+        """How far the image reaches from the beam (``field_mm``, to the nearest edge) in
+        diffusion lengths of each fitted channel (:func:`measure.checks.field_diffusion_lengths`)."""
+        return field_diffusion_lengths(self.field_mm, self.fit.medium.sigma_a, self.fit.medium.sigma_s_prime)
+
+    @property
+    def warnings(self) -> list[str]:
+        """Channels whose sigma_a is loose because the field is narrow (:func:`measure.checks.field_warnings`).
+
+        Only where the fit is ``ok``: a poor fit's errors mean nothing, and its own warning
+        names the likelier causes."""
+        ok = np.array([q == "ok" for q in self.quality])
+        return field_warnings(self.field_diffusion_lengths[ok], np.asarray(self.fit.medium.sigma_a).reshape(-1)[ok],
+                              np.asarray(self.fit.sigma_a_err).reshape(-1)[ok],
+                              [c for c, keep in zip(self.channels, ok) if keep], field_mm=self.field_mm)
 
     @property
     def quality(self) -> list[str]:
@@ -56,6 +74,8 @@ class MeasurementFit:
             "converged": [bool(x) for x in np.asarray(f.converged).reshape(-1)],
             "chi2_reduced": as_list(f.chi2_reduced),
             "quality": self.quality,
+            "field_mm": float(self.field_mm),
+            "field_diffusion_lengths": as_list(self.field_diffusion_lengths),
             "model": self.model,
             "g": self.g,
             "observable": "exitance" if self.view_angle_deg is None else "radiance",
@@ -147,4 +167,7 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
                      field_radii=field, pixel_area=pixel_mm**2, scale_stderr=scale_stderr, beam_sigma=sigma,
                      model=model, g=g, view_cos=None if view_angle_deg is None else np.cos(np.radians(view_angle_deg)),
                      grid=grid, **(fit_options or {}))
-    return MeasurementFit(fit, profile, calibrated, center, sigma, tuple(channels), model, float(g), view_angle_deg)
+    height, width = calibrated.reflectance.shape[:2]
+    field_mm = pixel_mm * (min(center[0], center[1], height - 1 - center[0], width - 1 - center[1]) + 0.5)
+    return MeasurementFit(fit, profile, calibrated, center, sigma, tuple(channels), model, float(g), view_angle_deg,
+                          float(field_mm))

@@ -24,15 +24,34 @@ degrees. ``benchmarks/measurement.py`` measures what that average differs by.
 from __future__ import annotations
 
 import numpy as np
+from scipy.special import erf
 
 from jsss import transport
 from jsss.medium import Medium
 from jsss.montecarlo import _params
 from jsss.photon_walk import run_walk
 
-from .synth import SyntheticMeasurement, _beam
+from .synth import SyntheticMeasurement
 
-__all__ = ["synthesize_walk"]
+__all__ = ["pixel_beam_reference", "synthesize_walk"]
+
+
+def pixel_beam_reference(size: int, centre, pixel_mm: float, beam_sigma_mm: float, *, channels: int = 1,
+                         reflectance: float = 0.99) -> np.ndarray:
+    """The white reference as a camera records it: the Gaussian beam's irradiance times
+    ``reflectance``, integrated over each pixel (per unit area, ``(size, size, channels)``).
+
+    The walk's photons are counted per pixel, so its image is integrated over pixels too;
+    a reference sampled at pixel centres would be narrower than the beam the walk's image
+    saw by the pixel's own width (variance ``pixel**2 / 12`` per axis: 8 % of the beam's
+    variance for a beam one pixel wide), and the fit would convolve with the wrong beam.
+    """
+    edges = (np.arange(size + 1) - 0.5) * pixel_mm
+    scale = np.sqrt(2.0) * beam_sigma_mm
+    rows = np.diff(0.5 * erf((edges - centre[0] * pixel_mm) / scale))
+    cols = np.diff(0.5 * erf((edges - centre[1] * pixel_mm) / scale))
+    image = reflectance * np.outer(rows, cols) / pixel_mm**2
+    return np.repeat(image[..., None], channels, axis=-1)
 
 
 def synthesize_walk(medium: Medium, *, g: float = 0.0, photons: int = 1_000_000, pixel_mm: float = 0.05,
@@ -89,9 +108,8 @@ def synthesize_walk(medium: Medium, *, g: float = 0.0, photons: int = 1_000_000,
         radiance_factor = entering * counts / (photons * pixel_mm**2 * (1 - cos_cone**2))  # pi (1 - F0) L
         images.append(radiance_factor.reshape(size, size))
     sample = np.stack(images, axis=-1)
-    rows, cols = np.indices((size, size))
-    radii = np.hypot(rows - centre[0], cols - centre[1]) * pixel_mm
-    reference = reference_reflectance * _beam(radii, beam_sigma_mm, sample.shape[-1])
+    reference = pixel_beam_reference(size, centre, pixel_mm, beam_sigma_mm, channels=sample.shape[-1],
+                                     reflectance=reference_reflectance)
     truth = dict(sigma_a=sigma_a.tolist(), sigma_s_prime=sigma_s_prime.tolist(), eta=eta.tolist(), g=float(g),
                  pixel_mm=pixel_mm, size=size, beam_sigma_mm=beam_sigma_mm, center=list(centre),
                  reference_reflectance=reference_reflectance, photons=int(photons), cone_deg=cone_deg, seed=seed,

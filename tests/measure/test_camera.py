@@ -77,6 +77,47 @@ def test_reading_a_camera_image_as_exitance_is_biased_and_flagged(walk_image, gr
     assert _fit(image, medium, grid, model="dipole")["quality"][0].startswith("poor")
 
 
+@pytest.fixture(scope="module")
+def wide_walk_image():
+    """Albedo' 0.99, eta 1.3, g 0: 5 x 10^5 photons on 256 px of 0.18 mm, a half-field of 4
+    diffusion lengths (1/sigma_tr = 5.8 mm), the framing benchmarks/measurement_transport.py uses."""
+    medium = Medium(0.01, 0.99, 1.3)
+    pixel_mm = 4 / np.sqrt(3 * 0.01) / 128
+    return medium, pixel_mm, synthesize_walk(medium, photons=500_000, size=256, pixel_mm=pixel_mm,
+                                             beam_sigma_mm=pixel_mm, cone_deg=TOP_BIN_DEG, seed=5)
+
+
+def test_a_field_of_four_diffusion_lengths_measures_sigma_a_within_3_percent(wide_walk_image, grid):
+    """Framed to reach the profile's decay, the camera fit of a walk at albedo' 0.99 gets both
+    coefficients within 3 % and within 3 stated errors, and the stated errors are small (the
+    narrow field of `walk_image`, 0.55 diffusion lengths, states 8 % for sigma_a with twice
+    the photons). No field warning."""
+    medium, pixel_mm, image = wide_walk_image
+    fit = fit_measurement(image.measurement, image.reference, pixel_mm, 1.3, channels=("Y",), grid=grid,
+                          model="transport")
+    table = fit.table()
+    for rel, z in _errors(table, medium):
+        assert abs(rel) < 0.03 and abs(z) < 3, (rel, z)
+    assert table["sigma_a_err"][0] / 0.01 < 0.025 and table["sigma_s_prime_err"][0] / 0.99 < 0.02
+    assert table["field_diffusion_lengths"][0] == pytest.approx(4.0, rel=0.1)
+    assert fit.warnings == [] and table["quality"] == ["ok"]
+
+
+def test_a_field_short_of_the_diffusion_length_is_named_as_the_cause(wide_walk_image, grid):
+    """The centre 24 x 24 pixels of the same image (0.38 diffusion lengths): sigma_a's stated
+    error grows past 10 %, and the fit says the field, not the fit, is the cause, with the
+    diffusion length and the fix; the estimate stays within its (now wide) stated errors."""
+    medium, pixel_mm, image = wide_walk_image
+    lo, hi = 128 - 12, 128 + 12
+    fit = fit_measurement(image.measurement[lo:hi, lo:hi], image.reference[lo:hi, lo:hi], pixel_mm, 1.3,
+                          channels=("Y",), grid=grid, model="transport")
+    table = fit.table()
+    assert table["field_diffusion_lengths"][0] < 0.5
+    assert table["sigma_a_err"][0] / 0.01 > 0.1 and abs(_errors(table, medium)[0][1]) < 3
+    (message,) = fit.warnings
+    assert "channel Y" in message and "diffusion lengths" in message and "widen the field" in message
+
+
 def test_exit_lobe_carries_the_exitance_and_the_dipole_radiance_uses_it():
     """int L cos dw over the outside hemisphere is the exitance (quadrature, eta 1.0-1.6), and
     dipole.radiance is the profile times that lobe."""
