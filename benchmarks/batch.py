@@ -8,12 +8,17 @@ once per worker count: the whole command as a user runs it (start-up, compilatio
 worker, fits, the table), so the ratio to one worker is what a user gains. One worker is the
 in-process path (XLA threads over every core); Dask workers are separate processes. Every run starts with an empty compilation cache of its own (cold, as on a
 new machine), then runs once more on the cache it filled (warm).
+
+"cores busy" is the CPU time of the command and all its processes (user + system, from
+``getrusage`` of the waited-for children) over its wall time: how much of the machine one
+run already uses, and so the most that more workers could add (cores / cores busy).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import platform
 import subprocess
 import sys
@@ -54,22 +59,25 @@ def main(argv=None):
             manifest.append(f"{name}{i}.exr,{name}{i}_ref.exr,{name}{i}_dark.exr,{ETA[name]}")
         with open(os.path.join(folder, "manifest.csv"), "w") as handle:
             handle.write("\n".join(manifest) + "\n")
-        print("| workers | cache | seconds | images / s | x one worker (same cache state) | failed rows |")
-        print("|---:|---|---:|---:|---:|---:|")
+        print("| workers | cache | seconds | images / s | x one worker (same cache state) | cores busy | failed rows |")
+        print("|---:|---|---:|---:|---:|---:|---:|")
         base = {}
         for workers in args.workers:
             env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": os.path.join(folder, f"xla{workers}")}
             for state in ("cold", "warm"):
                 out = os.path.join(folder, f"table{workers}{state}.csv")
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
                 t0 = time.perf_counter()
                 run = subprocess.run([sys.executable, "-m", "measure.cli", "batch", "--manifest",
                                       os.path.join(folder, "manifest.csv"), "--out", out, "--workers", str(workers)],
                                      capture_output=True, text=True, stdin=subprocess.DEVNULL, env=env)
                 seconds = time.perf_counter() - t0
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
                 failed = sum(1 for line in open(out) if ",failed," in line) if os.path.exists(out) else args.images
                 base.setdefault(state, seconds)
                 print(f"| {workers} | {state} | {seconds:.1f} | {args.images / seconds:.2f} | "
-                      f"{base[state] / seconds:.2f} | {failed} |", flush=True)
+                      f"{base[state] / seconds:.2f} | {cpu / seconds:.2f} of {os.cpu_count()} | {failed} |", flush=True)
                 if run.returncode not in (0, 1):
                     print(run.stderr[-2000:], file=sys.stderr)
     return 0

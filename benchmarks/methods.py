@@ -8,9 +8,13 @@ over the object's pixels, milliseconds per frame (median of 3 after compiling), 
 preparation, and the speed-up over the reference computed in the same run.
 
     python benchmarks/methods.py [--quick] [--calibrate] [--figure docs/methods.png]
+    python benchmarks/methods.py --validate-only
 
 ``--calibrate`` writes the rows to jsss/render/calibration.json, the table the planner
-reads; ``--figure`` saves the near frames side by side with their error maps.
+reads; ``--figure`` saves the near frames side by side with their error maps. Every run
+ends with the leave-one-scene-out check of the table in use (each scene's frames predicted
+from the other scenes' rows: the predicted and measured error of what the planner would
+choose); ``--validate-only`` prints just that, without rendering.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from jsss.render import load_scene, plan_scene  # noqa: E402
-from jsss.render.calibration import save_calibration  # noqa: E402
+from jsss.render.calibration import leave_one_scene_out, load_calibration, save_calibration  # noqa: E402
 from jsss.render.comparison import compare_methods, scene_at_distance  # noqa: E402
 from jsss.render.reference import reference_radiance  # noqa: E402
 from jsss.render.shading import tone_map  # noqa: E402
@@ -73,7 +77,11 @@ def main():
                         "(default 96 x 72, 300k)")
     parser.add_argument("--calibrate", action="store_true", help="write jsss/render/calibration.json")
     parser.add_argument("--figure", type=Path, default=None, help="save the near frames and error maps")
+    parser.add_argument("--validate-only", action="store_true", help="only the leave-one-scene-out check of the table")
     args = parser.parse_args()
+    if args.validate_only:
+        validate()
+        return 0
     width, height, points = (64, 48, 100_000) if args.quick else (96, 72, 300_000)
     stamp = f"{time.strftime('%Y-%m-%d')}, {platform.machine()} CPU x{jax.local_device_count()} " \
             f"({jax.devices()[0].platform}), {width}x{height}, {points} reference points"
@@ -114,7 +122,30 @@ def main():
             chosen = next(e for e in plan.estimates if (e.method, e.knob) == (plan.method, plan.knob))
             print(f"| {name} | {100 * target:g} % | {plan.method} | {chosen.knob} | {100 * chosen.error:.2f} % | "
                   f"{chosen.ms:.3g} |")
+    validate()
     return 0
+
+
+def validate(targets=(0.2, 0.05, 0.02)):
+    """Leave one scene out: predict each scene's calibration frames from the other scenes."""
+    rows = load_calibration()
+    print("\nleave one scene out (each scene's frames predicted from the other scenes' rows; "
+          "error of the method chosen, predicted beside measured):")
+    print("| held-out scene | reach in frame | features | target | chosen | predicted | measured | meets |")
+    print("|---|---|---|---|---|---|---|---|")
+    misses, total, gaps = 0, 0, []
+    for target in targets:
+        for frame in leave_one_scene_out(rows, target):
+            f = frame["features"]
+            method, knob = frame["chosen"]
+            total += 1
+            misses += not frame["meets"]
+            gaps.extend(abs(p - m) for p, m in frame["errors"].values())
+            print(f"| {frame['scene']} | {f.blur_frame:.3g} | {f.describe().rsplit(', reach', 1)[0]} | "
+                  f"{100 * target:g} % | {method} {knob} | {100 * frame['predicted']:.2f} % | "
+                  f"{100 * frame['measured']:.2f} % | {'yes' if frame['meets'] else 'NO'} |")
+    print(f"\n{total - misses} of {total} held-out choices met their target; median |predicted - measured| "
+          f"over every method and knob: {100 * np.median(gaps):.2f} points")
 
 
 if __name__ == "__main__":

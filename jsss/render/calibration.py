@@ -6,17 +6,33 @@ brute-force surface integral of the exact profile and its time, and writes
 ``calibration.json`` next to this module. The planner reads that table; nothing here is a
 tuned constant.
 
-The error of a method depends mostly on how many pixels the profile spans (its RMS
-radius over one pixel's footprint, the *blur*): Lambert's error shrinks as the blur falls
-below a pixel (down to the dimming diffusion causes on a curved object, about v/R^2) and
-grows with many; image-space noise grows with the blur. So a prediction for a new scene
-takes, per method and knob, the worst error among calibration frames whose blur lies
-within a factor 2 of the scene's (or the nearest frame's when none does), scales the
-measured frame time by the work (pixels for pixel methods, texels for texture space) and
-adds the method's own preparation (scaled too for texture space's texel bake). Frames of
-objects with open edges (a plane) are kept apart from closed ones: light that leaves
-through an open edge is lost in the reference and in image-space integration but kept by
-the others.
+The error of a method depends on what the frame shows, described by
+:class:`FrameFeatures`, all independent of the image's resolution:
+
+* **the profile's reach in the frame** (its RMS radius over the frame's height at the object,
+  ``blur_frame``): Lambert's error shrinks as it falls (down to the dimming diffusion causes on
+  a curved object, about v/R^2) and grows with it; image-space noise grows with it. The RMS
+  radius in *pixels* (the feature until 2026-12-02) is not it: the same framing at 320 x 240
+  spans 3.3x the pixels of the calibration's 96 x 72, and matched the backlit skin to the
+  calibration's half-distance frames (Lambert 2.9 %) instead of its own framing (6.2 %);
+* **open or closed surface**: light that leaves through an open edge is lost in the reference
+  and in image-space integration but kept by the others;
+* **light from behind** (``backlit``: the share of the irradiance at the object from lights
+  that travel towards the camera): the light the camera sees then arrives through the
+  object, around its silhouette, which a method without spread (Lambert, normal filtering)
+  cannot show;
+* **curvature** (the profile's RMS radius over the object's radius; 0 for a plane): the
+  dimming of a curved surface and the light wrapping past its terminator.
+
+A prediction for a new frame takes, per method and knob, the worst error among calibration
+frames *alike* in all four (the same surface kind and lighting class, curvature and reach
+within a factor 2), so the planner never picks a method whose measured error on a similar
+frame exceeds the target. With no alike frame it takes the worst of the frames of the same
+surface kind and lighting class (else of all), and says so: extrapolating is done
+pessimistically. Time scales the measured frame time by the work (pixels for pixel methods,
+texels for texture space) and adds the method's own preparation (scaled too for texture
+space's texel bake). :func:`leave_one_scene_out` predicts each calibration scene from the
+others, the check of these features ``benchmarks/methods.py`` prints.
 """
 
 from __future__ import annotations
@@ -27,11 +43,38 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CalibrationRow", "MethodEstimate", "choose_method", "default_calibration_path", "estimate_methods",
-           "knob_label", "load_calibration", "parse_knob", "save_calibration"]
+__all__ = ["CalibrationRow", "FrameFeatures", "MethodEstimate", "choose_method", "default_calibration_path",
+           "estimate_methods", "knob_label", "leave_one_scene_out", "load_calibration", "parse_knob",
+           "save_calibration"]
 
 METHODS = ("lambert", "normal filtering", "image-space", "texture-space")
-_NEIGHBOURHOOD = 2.0  # calibration frames within this factor of blur count as alike
+_NEIGHBOURHOOD = 2.0  # calibration frames within this factor of reach and of curvature count as alike
+BACKLIT = 0.5  # a frame is back-lit when at least this share of its irradiance travels towards the camera
+FLAT = 0.02  # curvature (RMS radius / object radius) below which a surface counts as flat
+
+
+@dataclass(frozen=True)
+class FrameFeatures:
+    """What decides a method's error on a frame (module docstring).
+
+    ``blur_pixels``: the profile's RMS radius over one pixel's footprint at the object's
+    nearest point; ``blur_frame``: the same over the frame's height there (resolution-free);
+    ``closed``: the surface has no open boundary; ``backlit``: share in [0, 1] of the
+    irradiance at the object from lights travelling towards the camera; ``curvature``: the
+    RMS radius over the object's bounding radius (0 for an open surface).
+    """
+
+    blur_pixels: float
+    blur_frame: float
+    closed: bool = True
+    backlit: float = 0.0
+    curvature: float = 0.0
+
+    def describe(self) -> str:
+        light = "back-lit" if self.backlit >= BACKLIT else "front-lit"
+        shape = "closed" if self.closed else "open"
+        bend = "flat" if self.curvature < FLAT else f"curvature {self.curvature:.2g}"
+        return f"{shape}, {light} ({100 * self.backlit:.0f} % from behind), {bend}, reach {self.blur_frame:.3g} of the frame"
 
 
 @dataclass(frozen=True)
@@ -51,10 +94,17 @@ class CalibrationRow:
     work: int
     prep_ms: float = 0.0
     closed: bool = True
+    blur_frame: float = float("nan")  # nan: a table from before 2026-12-02, matched by blur_pixels
+    backlit: float = 0.0
+    curvature: float = 0.0
 
     def __post_init__(self):
         if self.method not in METHODS:
             raise ValueError(f"calibration row for {self.scene!r}: unknown method {self.method!r}; one of {METHODS}.")
+
+    @property
+    def features(self) -> FrameFeatures:
+        return FrameFeatures(self.blur_pixels, self.blur_frame, self.closed, self.backlit, self.curvature)
 
 
 @dataclass(frozen=True)
@@ -122,44 +172,62 @@ def save_calibration(rows, path=None, *, measured: str = "") -> Path:
     return path
 
 
-def estimate_methods(rows, blur_pixels: float, work: dict, *, closed: bool = True) -> list[MethodEstimate]:
-    """Predicted error and time of every (method, knob) in ``rows`` for a scene.
+def _within(a: float, b: float, factor: float = _NEIGHBOURHOOD) -> bool:
+    return abs(np.log(max(a, 1e-6) / max(b, 1e-6))) <= np.log(factor)
+
+
+def _same_kind(row: CalibrationRow, features: FrameFeatures) -> bool:
+    """The same surface kind (open or closed) and lighting class (front- or back-lit)."""
+    return row.closed == features.closed and (row.backlit >= BACKLIT) == (features.backlit >= BACKLIT)
+
+
+def _alike(row: CalibrationRow, features: FrameFeatures) -> bool:
+    """Alike in all features: kind, lighting, curvature and the profile's reach (module docstring)."""
+    if not _same_kind(row, features):
+        return False
+    flat = row.curvature < FLAT, features.curvature < FLAT
+    if flat[0] != flat[1] or not (flat[0] or _within(row.curvature, features.curvature)):
+        return False
+    if np.isnan(row.blur_frame):  # an old table: reach in pixels
+        return _within(row.blur_pixels, features.blur_pixels)
+    return _within(row.blur_frame, features.blur_frame)
+
+
+def estimate_methods(rows, features: FrameFeatures, work: dict) -> list[MethodEstimate]:
+    """Predicted error and time of every (method, knob) in ``rows`` for a frame.
 
     Parameters
     ----------
     rows : iterable of CalibrationRow
-    blur_pixels : float
-        The scene's profile RMS radius over its pixel footprint.
+    features : FrameFeatures
+        The frame's features (:func:`jsss.render.planner.frame_features`).
     work : dict
         Pixels (for pixel methods) or texels (``"texture-space"``) the scene would process,
         keyed by method.
-    closed : bool
-        Whether the scene's surface is closed; frames of the same kind are preferred (at an
-        open edge light leaves the object, which only image-space integration accounts for).
     """
+    if not isinstance(features, FrameFeatures):
+        raise TypeError(f"estimate_methods(features=...) takes a FrameFeatures; got {type(features).__name__} "
+                        "(a blur in pixels alone no longer decides; see jsss.render.calibration).")
     groups: dict = {}
     for row in rows:
         groups.setdefault((row.method, row.knob), []).append(row)
     estimates = []
-    blur = max(blur_pixels, 1e-6)
     for (method, knob), everything in groups.items():
-        group = [r for r in everything if r.closed == closed] or everything
-        kind = "closed" if closed else "open"
-        distance = np.array([abs(np.log(max(r.blur_pixels, 1e-6) / blur)) for r in group])
-        alike = [r for r, d in zip(group, distance) if d <= np.log(_NEIGHBOURHOOD)]
+        alike = [r for r in everything if _alike(r, features)]
         if alike:
-            worst = max(alike, key=lambda r: r.error)
-            basis = (f"worst of {len(alike)} {kind}-surface frame(s) at blur "
-                     f"{blur / _NEIGHBOURHOOD:.3g}-{blur * _NEIGHBOURHOOD:.3g} px")
+            basis_rows = alike
+            basis = f"worst of {len(alike)} alike frame(s): {', '.join(sorted({r.scene for r in alike}))}"
         else:
-            worst = group[int(np.argmin(distance))]
-            basis = f"nearest frame {worst.scene} at blur {worst.blur_pixels:.3g} px"
+            basis_rows = [r for r in everything if _same_kind(r, features)] or everything
+            basis = (f"no alike frame; worst of {len(basis_rows)} frame(s) of "
+                     f"{', '.join(sorted({r.scene for r in basis_rows}))}")
+        worst = max(basis_rows, key=lambda r: r.error)
         # One frame with its own preparation: what rendering this scene once costs. Frames
         # scale with the work; so does texture space's texel bake, while the normal filter's
         # preparation is mostly the mesh's eigenvectors, which do not follow the pixels.
         ms = float(np.median([r.ms * work[method] / r.work
                               + r.prep_ms * (work[method] / r.work if method == "texture-space" else 1.0)
-                              for r in (alike or [worst])]))
+                              for r in basis_rows]))
         estimates.append(MethodEstimate(method, knob, worst.error, ms, basis))
     return sorted(estimates, key=lambda e: e.ms)
 
@@ -178,3 +246,36 @@ def choose_method(estimates, target: float):
     best = min(estimates, key=lambda e: e.error)
     return best, (f"no method is predicted to meet {100 * target:.3g} %; the most accurate: {best.method}"
                   + (f" ({best.knob})" if best.knob else "") + f", {100 * best.error:.2g} % ({best.basis})")
+
+
+def leave_one_scene_out(rows, target: float) -> list[dict]:
+    """Predict each calibration scene's frames from the other scenes' rows alone.
+
+    For every frame of every scene: each (method, knob)'s predicted error beside its measured
+    one, and the method the planner would choose at ``target`` with that choice's measured
+    error. Returns one dict per frame: ``scene``, ``features``, ``chosen`` (method, knob),
+    ``predicted`` and ``measured`` (of the choice), ``meets`` (measured <= target), and
+    ``errors``: {(method, knob): (predicted, measured)}.
+    """
+    rows = tuple(rows)
+    out = []
+    for scene in dict.fromkeys(r.scene for r in rows):
+        others = [r for r in rows if r.scene != scene]
+        frames: dict = {}
+        for r in rows:
+            if r.scene == scene:
+                frames.setdefault((r.blur_pixels, r.blur_frame), []).append(r)
+        for frame in frames.values():
+            measured = {(r.method, r.knob): r for r in frame}
+            work = {r.method: r.work for r in frame}
+            comparable = [r for r in others if (r.method, r.knob) in measured]
+            estimates = estimate_methods(comparable, frame[0].features, work)
+            if not estimates:  # no method of this frame was measured on any other scene
+                continue
+            chosen, _ = choose_method(estimates, target)
+            truth = measured[(chosen.method, chosen.knob)].error
+            out.append(dict(scene=scene, features=frame[0].features, chosen=(chosen.method, chosen.knob),
+                            predicted=chosen.error, measured=truth, meets=truth <= target,
+                            errors={(e.method, e.knob): (e.error, measured[(e.method, e.knob)].error)
+                                    for e in estimates}))
+    return out

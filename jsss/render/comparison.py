@@ -78,9 +78,11 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
         own_ms = 1000 * sum(t for k, t in result.timings.items() if k in _OWN_PREP)
         work = plan.texture_size**2 if method == "texture-space" else scene.camera.width * scene.camera.height
         knob = plan.knob
+        features = plan.features
         row = CalibrationRow(name, round(plan.blur_pixels, 4), method, knob,
                              relative_rms(result.radiance, reference.radiance, reference.mask), round(frame_ms, 3),
-                             int(work), round(own_ms, 3), is_closed(scene.mesh))
+                             int(work), round(own_ms, 3), is_closed(scene.mesh), blur_frame=round(features.blur_frame, 6),
+                             backlit=round(features.backlit, 4), curvature=round(features.curvature, 5))
         gaussians = len(plan.variances) if method == "texture-space" else 0
         frames.append(MethodFrame(row, result.radiance, prep_ms, gaussians))
         if progress is not None:

@@ -45,14 +45,15 @@ import numpy as np
 from ..dipole import total_reflectance
 from ..fresnel import fresnel_transmittance
 from ..single_scattering import single_scattering_albedo
-from .calibration import METHODS, choose_method, estimate_methods, knob_label, load_calibration, parse_knob
+from .calibration import (METHODS, FrameFeatures, choose_method, estimate_methods, knob_label, load_calibration,
+                          parse_knob)
 from .lighting import light_geometry, shadow_map
 from .mesh import is_closed
 from .profiles import choose_variances, full_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
 
-__all__ = ["PassDecision", "Plan", "plan_scene", "single_scattering_share"]
+__all__ = ["PassDecision", "Plan", "frame_features", "plan_scene", "single_scattering_share"]
 
 STRETCH_THRESHOLD = 0.10
 PASS_ORDER = ("texture geometry", "irradiance", "shadows", "layered profile", "normal filtering",
@@ -85,6 +86,7 @@ class Plan:
     knob : str, the chosen knob as the calibration table labels it (``"32 spp"``, ...)
     samples : int, image-space samples per pixel; normal_filter : ``spectral`` or ``naive``
     blur_pixels : float, the profile's RMS radius over the pixel footprint
+    features : FrameFeatures, what the method's predicted error rests on (:func:`frame_features`)
     """
 
     decisions: tuple
@@ -101,6 +103,7 @@ class Plan:
     normal_filter: str = "spectral"
     blur_pixels: float = 0.0
     knob: str = ""
+    features: FrameFeatures | None = None
 
     def on(self, name: str) -> bool:
         for d in self.decisions:
@@ -115,6 +118,8 @@ class Plan:
     def describe(self) -> str:
         head = [f"method: {self.method} -- {self.method_why}",
                 f"  profile RMS radius spans {self.blur_pixels:.3g} pixels"]
+        if self.features is not None:
+            head.append(f"  frame: {self.features.describe()}")
         if self.estimates:
             head.append("  predicted for this scene (from the calibration table):")
             head.append(f"    {'method':<18} {'knob':<12} {'error':>8} {'ms':>9}  basis")
@@ -140,6 +145,38 @@ def _pixel_footprint(scene: Scene) -> float:
     center, radius = (lo + hi) / 2, np.linalg.norm(hi - lo) / 2
     nearest = max(np.linalg.norm(np.asarray(scene.camera.position) - center) - radius, 1e-3)
     return float(scene.camera.pixel_size(nearest))
+
+
+def frame_features(scene: Scene) -> FrameFeatures:
+    """The features a method's error is predicted from (:class:`jsss.render.calibration.FrameFeatures`).
+
+    ``backlit`` weighs each light by the irradiance it brings to the object's centre (a
+    directional light its intensity, a point light intensity / distance^2, times its mean
+    colour) and counts those travelling towards the camera (their direction against the
+    camera's view axis); ``curvature`` is the profile's RMS radius over half the bounding
+    box's smallest side of a closed object, 0 for an open one.
+    """
+    lo, hi = (np.asarray(b, float) for b in scene.mesh.bounds)
+    center = (lo + hi) / 2
+    rms = _profile_rms(scene.material)
+    pixel = _pixel_footprint(scene)
+    view = np.asarray(scene.camera.look_at, float) - np.asarray(scene.camera.position, float)
+    view /= np.linalg.norm(view)
+    behind = total = 0.0
+    for light in scene.lights:
+        power = float(light.intensity * np.mean(light.color))
+        if light.kind == "directional":
+            travel = np.asarray(light.direction, float)
+        else:
+            travel = center - np.asarray(light.position, float)
+            power /= max(float(travel @ travel), 1e-12)
+        travel = travel / max(np.linalg.norm(travel), 1e-12)
+        total += power
+        behind += power if travel @ view < 0 else 0.0
+    closed = is_closed(scene.mesh)
+    curvature = rms / max(float(np.min(hi - lo)) / 2, 1e-9) if closed else 0.0
+    return FrameFeatures(blur_pixels=rms / pixel, blur_frame=rms / (pixel * scene.camera.height), closed=closed,
+                         backlit=behind / total if total > 0 else 0.0, curvature=float(curvature))
 
 
 def _uv_unit_length(scene: Scene) -> float:
@@ -186,8 +223,9 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: str | Non
         raise ValueError(f"samples must be >= 1 per pixel; got {samples}.")
     material = scene.material
     pixel = _pixel_footprint(scene)
-    rms = _profile_rms(material)
-    blur = rms / pixel
+    features = frame_features(scene)
+    blur = features.blur_pixels
+    rms = blur * pixel
     unit = _uv_unit_length(scene)  # texture size: a texel no larger than the pixel footprint
     size = 64
     while size < scene.texture_size and unit / size > pixel:
@@ -197,7 +235,7 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: str | Non
     work = {m: pixels for m in METHODS} | {"texture-space": size * size}
     estimates: tuple = ()
     if method is None:
-        estimates = tuple(estimate_methods(load_calibration(calibration), blur, work, closed=is_closed(scene.mesh)))
+        estimates = tuple(estimate_methods(load_calibration(calibration), features, work))
         chosen, method_why = choose_method(estimates, target)
         method = chosen.method
         knobs = parse_knob(method, chosen.knob)
@@ -262,7 +300,7 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: str | Non
     ordered = tuple(PassDecision(name, *decisions[name]) for name in PASS_ORDER)
     return Plan(ordered, variances, error, size, 7, 2.0 if texture_target < 0.15 else 4.0, pixel,
                 method=method, method_why=method_why, estimates=estimates, samples=samples,
-                normal_filter=normal_filter, blur_pixels=blur, knob=knob)
+                normal_filter=normal_filter, blur_pixels=blur, knob=knob, features=features)
 
 
 def _tsm_decision(scene: Scene, variances, weights, target):

@@ -1,10 +1,15 @@
 """The planner turns passes on and off from measurable properties of the scene."""
 
+from pathlib import Path
+
 import numpy as np
+import pytest
 
 from jsss.render import parse_scene, plan_scene
 from jsss.render.profiles import reduction_error
 from tests.jsss.render.scenes import flat_plane, scene_dict
+
+EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 
 
 def test_close_marble_sphere_needs_diffusion_and_stretch_correction():
@@ -65,35 +70,79 @@ def test_specular_off_when_the_material_has_none():
 
 # --- choosing among the four methods from the calibration table -----------------------------
 
-from jsss.render.calibration import (CalibrationRow, choose_method, estimate_methods, load_calibration,  # noqa: E402
-                                     save_calibration)
+from jsss.render.calibration import (CalibrationRow, FrameFeatures, choose_method, estimate_methods,  # noqa: E402
+                                     leave_one_scene_out, load_calibration, save_calibration)
+from jsss.render.planner import frame_features  # noqa: E402
 
 
-def _row(method, knob, blur, error, ms, prep=0.0, work=100):
-    return CalibrationRow("s", blur, method, knob, error, ms, work, prep)
+def _row(method, knob, reach, error, ms, prep=0.0, work=100, scene="s", backlit=0.0, curvature=0.2, closed=True):
+    return CalibrationRow(scene, 72 * reach, method, knob, error, ms, work, prep, closed, blur_frame=reach,
+                          backlit=backlit, curvature=curvature)
 
 
-SYNTHETIC = (_row("lambert", "", 0.5, 0.01, 1.0), _row("lambert", "", 8.0, 0.30, 1.0),
-             _row("image-space", "32 spp", 0.5, 0.05, 20.0), _row("image-space", "32 spp", 8.0, 0.06, 20.0),
-             _row("texture-space", "profile 5 %", 0.5, 0.02, 50.0, prep=30.0),
-             _row("texture-space", "profile 5 %", 8.0, 0.02, 50.0, prep=30.0),
-             _row("normal filtering", "spectral", 8.0, 0.3, 1.0, prep=50.0))
+def _frame(reach, backlit=0.0, curvature=0.2, closed=True):
+    return FrameFeatures(72 * reach, reach, closed, backlit, curvature)
+
+
+SYNTHETIC = (_row("lambert", "", 0.01, 0.01, 1.0), _row("lambert", "", 0.1, 0.30, 1.0),
+             _row("image-space", "32 spp", 0.01, 0.05, 20.0), _row("image-space", "32 spp", 0.1, 0.06, 20.0),
+             _row("texture-space", "profile 5 %", 0.01, 0.02, 50.0, prep=30.0),
+             _row("texture-space", "profile 5 %", 0.1, 0.02, 50.0, prep=30.0),
+             _row("normal filtering", "spectral", 0.1, 0.3, 1.0, prep=50.0))
 
 
 def test_estimates_take_the_worst_alike_frame_and_scale_time_by_work():
     work = {"lambert": 200, "image-space": 200, "normal filtering": 200, "texture-space": 100}
-    estimates = {e.method: e for e in estimate_methods(SYNTHETIC, 6.0, work)}
-    assert estimates["lambert"].error == 0.30 and "blur" in estimates["lambert"].basis
+    estimates = {e.method: e for e in estimate_methods(SYNTHETIC, _frame(0.08), work)}
+    assert estimates["lambert"].error == 0.30 and "alike" in estimates["lambert"].basis
     assert estimates["image-space"].ms == 40.0  # twice the pixels
     assert estimates["texture-space"].ms == 80.0  # frame + its own preparation
     assert estimates["normal filtering"].ms == 52.0  # frames follow the pixels, the eigenvectors do not
-    far = {e.method: e for e in estimate_methods(SYNTHETIC, 0.01, work)}
-    assert far["lambert"].error == 0.01 and "nearest frame" in far["lambert"].basis
+    near = {e.method: e for e in estimate_methods(SYNTHETIC, _frame(0.012), work)}
+    assert near["lambert"].error == 0.01
+    # Nothing alike (reach 20x beyond every frame): the worst frame of the kind, and it says so.
+    far = {e.method: e for e in estimate_methods(SYNTHETIC, _frame(2.0), work)}
+    assert far["lambert"].error == 0.30 and "no alike frame" in far["lambert"].basis
+
+
+def test_light_from_behind_and_an_open_surface_are_not_matched_to_front_lit_spheres():
+    """A back-lit frame at the same reach as a front-lit one is predicted from back-lit frames
+    only (Lambert misses the light through the silhouette), an open one from open ones."""
+    rows = SYNTHETIC + (_row("lambert", "", 0.1, 0.07, 1.0, scene="b", backlit=0.9),
+                        _row("lambert", "", 0.1, 0.15, 1.0, scene="p", closed=False, curvature=0.0))
+    work = dict.fromkeys(("lambert", "image-space", "normal filtering", "texture-space"), 100)
+    lambert = lambda features: next(e for e in estimate_methods(rows, features, work) if e.method == "lambert")  # noqa: E731
+    assert lambert(_frame(0.1, backlit=0.8)).error == 0.07 and "b" in lambert(_frame(0.1, backlit=0.8)).basis
+    assert lambert(_frame(0.1, closed=False, curvature=0.0)).error == 0.15
+    assert lambert(_frame(0.1)).error == 0.30
+    assert "no alike frame" in lambert(_frame(0.1, curvature=0.9)).basis  # a much tighter curve
+    try:
+        estimate_methods(rows, 8.0, work)
+    except TypeError as error:
+        assert "FrameFeatures" in str(error)
+    else:
+        raise AssertionError("a bare blur was accepted")
+
+
+def test_frame_features_do_not_depend_on_the_resolution_and_see_the_back_light():
+    """The same framing at 96 x 72 and 320 x 240 has one reach in the frame (the pixels differ
+    3.3x); skin_backlit's sun travels towards the camera, marble's lights do not."""
+    from jsss.render import load_scene
+    from jsss.render.comparison import scene_at_distance
+
+    skin = load_scene(EXAMPLES / "skin_backlit.toml")
+    small, large = (frame_features(scene_at_distance(skin, 1.0, width=w, height=h)) for w, h in ((96, 72), (320, 240)))
+    assert large.blur_pixels == pytest.approx(small.blur_pixels * 240 / 72, rel=1e-6)
+    assert large.blur_frame == pytest.approx(small.blur_frame, rel=1e-9)
+    assert small.backlit > 0.9 and small.closed and 0.1 < small.curvature < 1
+    marble = frame_features(load_scene(EXAMPLES / "marble_sphere.toml"))
+    plane = frame_features(load_scene(EXAMPLES / "ketchup_plane.toml"))
+    assert marble.backlit == 0.0 and (plane.closed, plane.curvature) == (False, 0.0)
 
 
 def test_choice_is_the_cheapest_meeting_the_target_else_the_most_accurate():
     work = dict.fromkeys(("lambert", "image-space", "normal filtering", "texture-space"), 100)
-    estimates = estimate_methods(SYNTHETIC, 8.0, work)
+    estimates = estimate_methods(SYNTHETIC, _frame(0.1), work)
     assert choose_method(estimates, 0.1)[0].method == "image-space"
     assert choose_method(estimates, 0.5)[0].method == "lambert"
     best, why = choose_method(estimates, 0.001)
@@ -132,17 +181,24 @@ def test_shipped_table_picks_a_cheaper_method_for_a_looser_target_and_says_why()
         assert "predicted for this scene" in text and f"method: {plan.method}" in text
 
 
-def test_shipped_table_picks_a_cheaper_method_for_a_scene_seen_from_far_away():
-    """The marble sphere from its own camera needs texture space for 6 %; from 20x as far its
-    profile spans a fraction of a pixel and Lambert is predicted to do (checks the shipped
-    table: rerunning the calibration may move these numbers, and this test says so)."""
-    near = parse_scene(scene_dict(camera={"position": [0.0, -110.0, 30.0], "fov": 28, "resolution": [96, 72]}))
+def test_shipped_table_follows_the_measured_errors_of_a_front_lit_sphere():
+    """The marble sphere from its own camera (96 x 72 and 320 x 240 alike): Lambert measured
+    2.6 % there, so it does for 5 %; for 2 % the cheapest method predicted to meet it (the
+    spectral normal filter at 1.4 % or texture space, by the pixels to process). From 20x as far the profile spans a fraction of a pixel, and the prediction
+    rests on the far frames (checks the shipped table: rerunning the calibration may move
+    these numbers, and this test says so)."""
+    for resolution in ([96, 72], [320, 240]):
+        near = parse_scene(scene_dict(camera={"position": [0.0, -110.0, 30.0], "fov": 28, "resolution": resolution}))
+        assert plan_scene(near, accuracy=0.05).method == "lambert"
+        tight = plan_scene(near, accuracy=0.02)
+        chosen = next(e for e in tight.estimates if (e.method, e.knob) == (tight.method, tight.knob))
+        assert tight.method != "lambert" and chosen.error <= 0.02
+        assert all(e.error > 0.02 for e in tight.estimates if e.ms < chosen.ms)
     far = parse_scene(scene_dict(camera={"position": [0.0, -2200.0, 600.0], "fov": 28, "resolution": [96, 72]}))
-    near_plan, far_plan = plan_scene(near, accuracy=0.06), plan_scene(far, accuracy=0.06)
+    far_plan, near_plan = plan_scene(far, accuracy=0.05), plan_scene(near, accuracy=0.05)
     assert far_plan.blur_pixels < near_plan.blur_pixels / 10
-    assert _predicted_ms(far_plan) < _predicted_ms(near_plan)
-    assert (near_plan.method, far_plan.method) == ("texture-space", "lambert")
-    assert f"{far_plan.blur_pixels:.3g} pixels" in far_plan.describe()
+    assert far_plan.method == "lambert" and "marble_sphere" in next(e.basis for e in far_plan.estimates)
+    assert f"{far_plan.blur_pixels:.3g} pixels" in far_plan.describe() and "front-lit" in far_plan.describe()
 
 
 def test_method_override_and_bad_method_names():
@@ -159,3 +215,49 @@ def test_method_override_and_bad_method_names():
             assert word in str(error)
         else:
             raise AssertionError(f"{kwargs} accepted")
+
+
+def test_the_planner_never_picks_a_method_whose_measured_error_on_an_alike_frame_exceeds_the_target():
+    """On the shipped table: for every calibration frame and target, the method chosen from all
+    rows, where it is predicted to meet the target, met it on that frame (each frame is alike
+    to itself, and a prediction is the worst alike frame)."""
+    rows = load_calibration()
+    frames: dict = {}
+    for r in rows:
+        frames.setdefault((r.scene, r.blur_pixels), []).append(r)
+    checked = 0
+    for frame in frames.values():
+        measured = {(r.method, r.knob): r.error for r in frame}
+        work = {r.method: r.work for r in frame}
+        for target in (0.2, 0.05, 0.02):
+            chosen, _ = choose_method(estimate_methods(rows, frame[0].features, work), target)
+            if chosen.error <= target:
+                assert measured[(chosen.method, chosen.knob)] <= target, (frame[0].scene, target, chosen)
+                checked += 1
+    assert checked >= 20
+
+
+def test_leave_one_scene_out_predicts_each_scene_from_the_others_only():
+    """The held-out scene's rows never enter its predictions: a scene unlike the rest gets the
+    pessimistic fallback, and every frame of every scene is reported with its measured error."""
+    rows = SYNTHETIC + (_row("lambert", "", 0.1, 0.07, 1.0, scene="b", backlit=0.9),
+                        _row("texture-space", "profile 5 %", 0.1, 0.01, 50.0, scene="b", backlit=0.9))
+    out = leave_one_scene_out(rows, 0.05)
+    assert {f["scene"] for f in out} == {"s", "b"} and len(out) == 3
+    (held,) = [f for f in out if f["scene"] == "b"]
+    # Predicted from "s" alone (front-lit): no alike frame, the worst of all its frames.
+    assert held["errors"][("lambert", "")] == (0.30, 0.07) and held["chosen"] == ("texture-space", "profile 5 %")
+    assert held["meets"] and held["measured"] == 0.01
+
+
+def test_examples_do_what_their_comments_say():
+    """skin_backlit: the planner picks texture space (the back light wraps around the
+    silhouette, which Lambert measured 6.0 % off on that framing) with the layered profile;
+    ketchup_plane: flat UVs, so no stretch correction."""
+    from jsss.render import load_scene
+
+    skin = plan_scene(load_scene(EXAMPLES / "skin_backlit.toml"))
+    assert skin.method == "texture-space" and skin.on("layered profile") and skin.on("diffusion")
+    assert "skin_backlit" in next(e.basis for e in skin.estimates if e.method == "lambert")
+    ketchup = plan_scene(load_scene(EXAMPLES / "ketchup_plane.toml"), method="texture-space")
+    assert not ketchup.on("stretch correction")
