@@ -56,10 +56,11 @@ for i, eta in enumerate(etas):
         mc = random_walk(medium, n_photons=photons // 2, max_steps=5000, seed=i * 100 + j, progress=False)
         errors[i, j] = float(dipole.total_reflectance(medium)) / mc.R - 1
 fig, ax = plt.subplots(figsize=(6, 3))
-image = ax.imshow(100 * errors, cmap="RdBu", vmin=-30, vmax=30, aspect="auto")
+limit = 10 * np.ceil(np.abs(100 * errors).max() / 10)  # symmetric, and wide enough for every value
+image = ax.imshow(100 * errors, cmap="RdBu", vmin=-limit, vmax=limit, aspect="auto")
 ax.set(xticks=range(len(albedos)), xticklabels=albedos, yticks=range(len(etas)), yticklabels=etas,
        xlabel="reduced albedo", ylabel="eta", title="dipole total reflectance error vs MC [%]")
-fig.colorbar(image)
+fig.colorbar(image, label="dipole / Monte Carlo - 1 [%]")
 print(np.round(100 * errors, 1))
 """),
 ]
