@@ -25,7 +25,7 @@ from jsss.render import load_scene, plan_scene
 from jsss.render.comparison import compare_methods, scene_at_distance
 from jsss.render.shading import tone_map
 
-FAST = os.environ.get("JSSS_FAST") == "1"   # the test suite renders smaller
+FAST = os.environ.get("JSSS_FULL") != "1"   # JSSS_FULL=1: the full size (see notebooks/README.md)
 size = (40, 30) if FAST else (96, 72)
 points = 40_000 if FAST else 300_000
 examples = os.path.join(os.path.dirname(os.path.abspath("methods.ipynb")), "..", "examples")

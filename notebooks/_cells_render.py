@@ -19,7 +19,7 @@ from dataclasses import replace
 from jsss.render import load_scene, plan_scene, render
 from jsss.render.shading import tone_map
 
-FAST = os.environ.get("JSSS_FAST") == "1"   # the test suite renders smaller
+FAST = os.environ.get("JSSS_FULL") != "1"   # JSSS_FULL=1: the full size (see notebooks/README.md)
 size = (96, 72) if FAST else (320, 240)
 texture = 128 if FAST else 512
 examples = os.path.join(os.path.dirname(os.path.abspath("render.ipynb")), "..", "examples")

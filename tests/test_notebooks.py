@@ -19,7 +19,7 @@ def test_there_are_notebooks():
 def test_notebook_executes(path, monkeypatch):
     """Execute the notebook in its own directory with a non-interactive matplotlib backend."""
     monkeypatch.setenv("MPLBACKEND", "Agg")
-    monkeypatch.setenv("JSSS_FAST", "1")  # notebooks may use fewer samples under test
+    monkeypatch.delenv("JSSS_FULL", raising=False)  # the notebooks' default (fast) settings
     nb = nbformat.read(path, as_version=4)
     client = nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
                                      resources={"metadata": {"path": str(path.parent)}})
