@@ -80,7 +80,8 @@ def _image(medium, *, g, photons, cone, pixel_mm, size, seed, cache):
                 # written before the references were integrated over pixels (2026-12-02) valid.
                 reference = pixel_beam_reference(truth["size"], truth["center"], truth["pixel_mm"],
                                                  truth["beam_sigma_mm"], reflectance=truth["reference_reflectance"])
-                return SyntheticMeasurement(stored["measurement"], reference, None, truth=truth), float(stored["seconds"])
+                image = SyntheticMeasurement(stored["measurement"], reference, None, truth=truth)
+                return image, float(stored["seconds"])
     start = time.perf_counter()
     image = synthesize_walk(medium, g=g, photons=photons, cone_deg=cone, seed=seed, pixel_mm=pixel_mm, size=size,
                             beam_sigma_mm=pixel_mm)

@@ -74,7 +74,8 @@ class FrameFeatures:
         light = "back-lit" if self.backlit >= BACKLIT else "front-lit"
         shape = "closed" if self.closed else "open"
         bend = "flat" if self.curvature < FLAT else f"curvature {self.curvature:.2g}"
-        return f"{shape}, {light} ({100 * self.backlit:.0f} % from behind), {bend}, reach {self.blur_frame:.3g} of the frame"
+        return (f"{shape}, {light} ({100 * self.backlit:.0f} % from behind), {bend}, "
+                f"reach {self.blur_frame:.3g} of the frame")
 
 
 @dataclass(frozen=True)

@@ -81,8 +81,9 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
         features = plan.features
         row = CalibrationRow(name, round(plan.blur_pixels, 4), method, knob,
                              relative_rms(result.radiance, reference.radiance, reference.mask), round(frame_ms, 3),
-                             int(work), round(own_ms, 3), is_closed(scene.mesh), blur_frame=round(features.blur_frame, 6),
-                             backlit=round(features.backlit, 4), curvature=round(features.curvature, 5))
+                             int(work), round(own_ms, 3), is_closed(scene.mesh),
+                             blur_frame=round(features.blur_frame, 6), backlit=round(features.backlit, 4),
+                             curvature=round(features.curvature, 5))
         gaussians = len(plan.variances) if method == "texture-space" else 0
         frames.append(MethodFrame(row, result.radiance, prep_ms, gaussians))
         if progress is not None:
