@@ -88,8 +88,7 @@ def _image(medium, *, g, photons, cone, pixel_mm, size, seed, cache):
     seconds = time.perf_counter() - start
     if path:
         partial = path + f".{os.getpid()}.tmp.npz"
-        np.savez(partial, measurement=image.measurement, reference=image.reference, truth=json.dumps(image.truth),
-                 seconds=seconds)
+        np.savez(partial, measurement=image.measurement, truth=json.dumps(image.truth), seconds=seconds)
         os.replace(partial, path)
     return image, seconds
 

@@ -142,15 +142,18 @@ def field_diffusion_lengths(field_mm: float, sigma_a, sigma_s_prime):
     return float(field_mm) * np.sqrt(3 * sigma_a * sigma_t)
 
 
-def field_warnings(lengths, sigma_a, sigma_a_err, channels, *, field_mm: float) -> list[str]:
+def field_warnings(lengths, sigma_a, sigma_a_err, channels, *, field_mm: float, quality=None) -> list[str]:
     """One message per channel whose sigma_a is loose because the image ends before the
-    profile's decay (module docstring); empty where the field is wide enough or the error small."""
+    profile's decay (module docstring); empty where the field is wide enough or the error small.
+    Channels whose ``quality`` (:func:`fit_quality`) is not ``"ok"`` are skipped: a poor fit's
+    errors mean nothing, and its own warning names the likelier causes."""
+    quality = ["ok"] * len(channels) if quality is None else quality
     out = []
-    for name, reach, value, error in zip(channels, np.asarray(lengths, float).reshape(-1),
-                                         np.asarray(sigma_a, float).reshape(-1),
-                                         np.asarray(sigma_a_err, float).reshape(-1)):
+    for name, reach, value, error, fit in zip(channels, np.asarray(lengths, float).reshape(-1),
+                                              np.asarray(sigma_a, float).reshape(-1),
+                                              np.asarray(sigma_a_err, float).reshape(-1), quality):
         relative = error / value if value > 0 else np.inf
-        if reach < MIN_FIELD_DIFFUSION_LENGTHS and not relative <= LOOSE_SIGMA_A:
+        if fit == "ok" and reach < MIN_FIELD_DIFFUSION_LENGTHS and not relative <= LOOSE_SIGMA_A:
             diffusion_mm = field_mm / reach if reach > 0 else np.inf
             out.append(f"channel {name}: sigma_a is loosely constrained (stated error {relative:.0%}): the image "
                        f"reaches {field_mm:.3g} mm from the beam, {reach:.2g} diffusion lengths (1/sigma_tr = "

@@ -42,14 +42,10 @@ class MeasurementFit:
 
     @property
     def warnings(self) -> list[str]:
-        """Channels whose sigma_a is loose because the field is narrow (:func:`measure.checks.field_warnings`).
-
-        Only where the fit is ``ok``: a poor fit's errors mean nothing, and its own warning
-        names the likelier causes."""
-        ok = np.array([q == "ok" for q in self.quality])
-        return field_warnings(self.field_diffusion_lengths[ok], np.asarray(self.fit.medium.sigma_a).reshape(-1)[ok],
-                              np.asarray(self.fit.sigma_a_err).reshape(-1)[ok],
-                              [c for c, keep in zip(self.channels, ok) if keep], field_mm=self.field_mm)
+        """Channels of an ``ok`` fit whose sigma_a is loose because the field is narrow
+        (:func:`measure.checks.field_warnings`)."""
+        return field_warnings(self.field_diffusion_lengths, self.fit.medium.sigma_a, self.fit.sigma_a_err,
+                              self.channels, field_mm=self.field_mm, quality=self.quality)
 
     @property
     def quality(self) -> list[str]:
