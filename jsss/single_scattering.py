@@ -144,7 +144,15 @@ def single_scattering_brdf_from_cosines(medium: Medium, cos_i, cos_o, tangential
     cos_i_in, cos_o_in, cos_phase, fresnel = _geometry_from_cosines(medium, cos_i, cos_o, tangential_dot)
     sigma_s, sigma_t = _coefficients(medium, g)
     albedo = sigma_s / sigma_t
-    return albedo * fresnel * henyey_greenstein(cos_phase, g) / ((cos_i_in + cos_o_in) * jnp.square(medium.eta))
+    # At eta = 1 both refracted cosines vanish together at grazing incidence and exit (the
+    # background pixels of a frame, where normals are zero): 1 / (cos_i' + cos_o') is infinite
+    # there, and the radiance it meets is multiplied by cos_i = 0. The BRDF is set to 0 on that
+    # set, with the double where that keeps its gradient finite too.
+    path = cos_i_in + cos_o_in
+    grazing = path <= 0
+    safe_path = jnp.where(grazing, 1.0, path)
+    value = albedo * fresnel * henyey_greenstein(cos_phase, g) / (safe_path * jnp.square(medium.eta))
+    return jnp.where(grazing, 0.0, value)
 
 
 @partial(jax.jit, static_argnames=("g", "nodes"))  # one program: op by op, 2.2 s per call (render planning)

@@ -11,7 +11,7 @@ from jsss.brdf import brdf
 from jsss.dipole import total_reflectance
 from jsss.montecarlo import random_walk
 from jsss.single_scattering import (henyey_greenstein, single_scattering, single_scattering_albedo,
-                                    single_scattering_brdf)
+                                    single_scattering_brdf, single_scattering_brdf_from_cosines)
 
 
 def direction(theta, phi):
@@ -134,3 +134,19 @@ def test_single_scattering_albedo_gradients_are_finite_at_normal_incidence_and_z
     h = 1e-6
     fd = (float(single_scattering_albedo(Medium(h, 0.9, 1.4))) - float(single_scattering_albedo(Medium(0.0, 0.9, 1.4)))) / h
     assert d_sa == pytest.approx(fd, rel=1e-4)
+
+
+def test_index_matched_brdf_is_finite_where_incidence_and_exit_both_graze():
+    """At eta = 1 both refracted cosines vanish at grazing incidence and exit (a frame's
+    background, where normals are zero): 1 / (cos_i' + cos_o') is infinite there, and a NaN
+    there once spread to every pixel of a fit. The BRDF is 0 on that set, its gradient finite,
+    and beside it the BRDF is its closed form albedo / (4 pi (cos_i + cos_o))."""
+    medium = Medium(jnp.array([0.1]), jnp.array([0.9]), jnp.array([1.0]))
+    value = single_scattering_brdf_from_cosines(medium, 0.0, 0.0, 0.0)
+    assert np.all(np.asarray(value) == 0.0)
+    grad = jax.grad(lambda a: single_scattering_brdf_from_cosines(Medium(a, 0.9, 1.0), 0.0, 0.0, 0.0).sum())(0.1)
+    assert np.isfinite(float(grad))
+    ci, co = 0.3, 0.6
+    tangential = -np.sqrt(1 - ci**2) * np.sqrt(1 - co**2)  # opposite azimuths
+    near = single_scattering_brdf_from_cosines(medium, ci, co, tangential)
+    assert float(near[0]) == pytest.approx(0.9 / (4 * np.pi * (ci + co)), rel=1e-12)

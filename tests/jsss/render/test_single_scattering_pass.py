@@ -67,3 +67,29 @@ def test_planner_turns_single_scattering_on_for_low_albedo_and_says_how_much():
     assert "% of the light leaving" in ketchup.describe()
     skin = plan_scene(load_scene("examples/skin_backlit.toml"))
     assert not skin.on("single scattering")  # layered: no homogeneous medium to scatter once in
+
+
+def test_an_index_matched_frame_is_finite_off_the_object_too():
+    """eta = 1 (no Fresnel boundary, the index-matched truth of benchmarks/inverse_rendering.py):
+    the background pixels, whose normals are zero, graze in and out at once; the frame and its
+    gradient must stay finite there (a NaN background had turned a whole fit into NaN)."""
+    import jax
+
+    data = {
+        "geometry": {"shape": "plane", "width": 40.0},
+        "material": {"sigma_a": [0.06, 0.9, 1.4], "sigma_s_prime": [0.18, 0.07, 0.03], "eta": 1.0, "specular": 0.0},
+        "lights": [{"type": "point", "position": [5.0, -5.0, 30.0], "intensity": 1000.0}],
+        "camera": {"position": [0.0, -70.0, 55.0], "look_at": [0.0, 0.0, 0.0], "fov": 40, "resolution": [24, 18]},
+        "render": {"texture_size": 64, "accuracy": 0.05},
+    }
+    scene = parse_scene(data)
+    plan = plan_scene(scene, method="lambert").replace("single scattering", True, "test")
+    frame = np.asarray(render(scene, plan, dtype=jnp.float64).radiance)
+    assert np.isfinite(frame).all() and (frame[0, 0] == 0).all() and frame.max() > 0
+
+    from fitting.render import _medium, _model_for
+
+    render_fn, model_data = _model_for(scene, plan, jnp.float64, "dipole", 0.0)
+    theta = jnp.log(jnp.array([0.06, 0.9, 1.4, 0.18, 0.07, 0.03]))
+    grad = jax.grad(lambda t: render_fn(_medium(t, jnp.ones(3)), model_data).sum())(theta)
+    assert np.isfinite(np.asarray(grad)).all()
