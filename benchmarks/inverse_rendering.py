@@ -40,10 +40,15 @@ from jsss.medium import Medium  # noqa: E402
 from jsss.render import load_scene, plan_scene, render  # noqa: E402
 
 
-def path_traced(scene, name, *, spp, chunks, cache, variant="auto"):
-    """Subsurface radiance (H, W, 3) of ``scene`` and its per-pixel standard error, from the cache or Mitsuba."""
+def path_traced(scene, name, *, spp, chunks, cache, interface="index-matched", variant="auto"):
+    """Subsurface radiance (H, W, 3) of ``scene`` and its per-pixel standard error, from the cache or Mitsuba.
+
+    ``interface`` "index-matched" renders the scene as given (its eta must be 1, see
+    :func:`transport_truth.index_matched`); "dielectric" renders its Fresnel boundary by the
+    rough-dielectric extrapolation of :func:`transport_truth.subsurface_truth`.
+    """
     cam = scene.camera
-    path = os.path.join(cache, f"{name}_{cam.width}x{cam.height}_{chunks}x{spp}.npz")
+    path = os.path.join(cache, f"{name}_{interface}_{cam.width}x{cam.height}_{chunks}x{spp}.npz")
     if os.path.exists(path):
         data = np.load(path)
         return data["truth"], data["stderr"]
@@ -51,10 +56,14 @@ def path_traced(scene, name, *, spp, chunks, cache, variant="auto"):
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as folder:
         ply = tt._mesh_file(scene, folder)
-        truth, per_chunk = tt.subsurface_truth(mi, scene, ply, spp, chunks)
+        if interface == "index-matched":
+            truth, per_chunk = tt.index_matched_truth(mi, scene, ply, spp, chunks)
+        else:
+            truth, per_chunk = tt.subsurface_truth(mi, scene, ply, spp, chunks)
     stderr = np.std(per_chunk, axis=0, ddof=1) / np.sqrt(chunks)
     os.makedirs(cache, exist_ok=True)
-    np.savez(path, truth=truth, stderr=stderr)
+    np.savez(path + ".part.npz", truth=truth, stderr=stderr)
+    os.replace(path + ".part.npz", path)  # a killed run leaves no truncated cache entry
     print(f"{name}: path traced in {time.perf_counter() - t0:.0f} s ({chunks} x {spp} spp, {mi.variant()})")
     return truth, stderr
 
@@ -105,7 +114,12 @@ def main(argv=None):
     parser.add_argument("--cache", default=os.path.join(tempfile.gettempdir(), "jsss_inverse_truth"))
     parser.add_argument("--block", type=int, default=4,
                         help="fit path-traced photos summed over BLOCK^2 pixel tiles (their noise is heavy-tailed)")
+    parser.add_argument("--variant", default="auto", choices=["auto", "llvm_ad_rgb", "scalar_rgb"],
+                        help="Mitsuba variant (auto: LLVM with libLLVM 19, else scalar)")
     parser.add_argument("--truth-only", action="store_true", help="path trace (fill the cache) and stop")
+    parser.add_argument("--interface", default="index-matched", choices=["index-matched", "dielectric"],
+                        help="index-matched: eta set to 1 on both sides (the path tracer's noise is low); "
+                             "dielectric: the scene's eta, extrapolated from rough dielectrics (noisy)")
     parser.add_argument("--consistency-size", type=int, nargs=2, default=(320, 240), metavar=("W", "H"),
                         help="size of the jsss-rendered photo that times a full-size fit")
     args = parser.parse_args(argv)
@@ -116,8 +130,11 @@ def main(argv=None):
     rng = np.random.default_rng(0)
     for name in args.scenes:
         base = load_scene(os.path.join(tt.EXAMPLES, f"{name}.toml"))
+        if args.interface == "index-matched":
+            base = tt.index_matched(base)
         scene = tt._with_resolution(base, width, height)
-        truth, stderr = path_traced(scene, name, spp=spp, chunks=chunks, cache=args.cache)
+        truth, stderr = path_traced(scene, name, spp=spp, chunks=chunks, cache=args.cache, interface=args.interface,
+                                    variant=args.variant)
         if args.truth_only:
             continue
         rd_true, mfp_true = true_artist_parameters(scene.material)

@@ -496,6 +496,11 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     m = int(block_used.sum()) * 3  # used tiles times channels
     chi2 = float(r @ r) / max(m - n_params, 1)
     J = np.asarray(jac)
+    if not (np.isfinite(r).all() and np.isfinite(J).all()):
+        # A NaN from the renderer would otherwise surface as "eigenvalues did not converge".
+        raise RenderFitError(f"{scene.source}: the fit's render or its derivative is not finite at sigma_a = "
+                             f"{np.exp(np.asarray(theta[:3])).tolist()}, sigma_s' = {np.exp(np.asarray(theta[3:6])).tolist()} "
+                             f"({plan.method}, {profile_model}); this is a bug in jsss: please report it with the scene.")
     covariance, null = _covariance(J, max(1.0, chi2))
     theta_np = np.asarray(theta)
     rel = _standard_errors(np.eye(len(theta_np)), covariance, null)  # errors of logarithms = relative errors
