@@ -16,7 +16,9 @@ the profile fit of the weights (:func:`jsss.render.profiles.render_profile`, dif
 in the medium), a weighted sum of those images and the per-pixel shading (single scattering
 included). The variances are planned for the starting material; if the fitted profile is not
 represented on them to the plan's accuracy, they are re-planned and the fit is repeated from
-there (at most ``replans`` times). The pixel methods (Lambert, normal filtering, image-space)
+there (at most ``replans`` times); so is the oblique-incidence law that scales the irradiance
+(:mod:`jsss.incidence`), which depends on the albedo (its change within the last round is not in
+the Jacobian). The pixel methods (Lambert, normal filtering, image-space)
 are differentiated through their whole frame.
 
 What the image constrains is reported, not assumed: the covariance
@@ -44,6 +46,7 @@ from scipy import ndimage
 
 from jsss import dipole, transport
 from jsss.fresnel import exit_lobe
+from jsss.incidence import incidence_ratio
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
 from jsss.render import plan_scene
@@ -273,6 +276,14 @@ def _texture_render(profile_model: str, g: float):
     return lambda medium, data: _texture_radiance(medium, data, profile_model, g)
 
 
+def _incidence_moved(before: Scene, after: Scene) -> float:
+    """Largest relative change of the oblique-incidence law between two scenes' media."""
+    cosines = jnp.linspace(0.05, 1.0, 20)
+    old = np.asarray(incidence_ratio(before.material.medium, cosines))
+    new = np.asarray(incidence_ratio(after.material.medium, cosines))
+    return float(np.max(np.abs(new / old - 1)))
+
+
 def _covariance(J, scale):
     """``scale (J^T J)^-1`` on the directions the data see, and the directions they do not.
 
@@ -336,7 +347,7 @@ def _model_for(scene, plan, dtype, profile_model, g):
 
     def render(medium, data):
         p = render_params(scene, plan, medium=medium, dtype=dtype, radii=radii)
-        return pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples,
+        return pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples, oblique=p.oblique,
                               specular=plan.on("specular"), roughness=material.roughness,
                               specular_weight=material.specular, single_scattering=plan.on("single scattering"),
                               medium=p.medium)
@@ -487,6 +498,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
                 changed.append("number of Gaussians")
             elif (moved := np.max(np.abs(np.log(next_plan.variances / plan.variances)))) > 0.1:
                 changed.append(f"Gaussian variances (moved by up to {100 * moved:.0f} %)")
+            if plan.on("oblique incidence") and (moved := _incidence_moved(fit_scene, next_scene)) > accuracy:
+                # The texture-space basis holds the irradiance scaled by the round's own law.
+                changed.append(f"oblique-incidence law (moved by up to {100 * moved:.2f} %)")
         if not changed:
             break
         history.append(f"re-planned for the estimate after round {round_ + 1}: " + ", ".join(changed))

@@ -64,7 +64,7 @@ class MonteCarloResult:
 
 def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=None, eta_bottom=None,
                 n_photons: int = 100_000, batch_size: int = 4096, max_steps: int = 1_000_000, bin_edges=None,
-                seed: int = 0, progress: bool | None = None) -> MonteCarloResult:
+                seed: int = 0, progress: bool | None = None, cos_incident: float = 1.0) -> MonteCarloResult:
     """Run the random walk for a single-channel medium.
 
     Parameters
@@ -92,6 +92,10 @@ def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=No
     seed : int, keyword-only
     progress : bool, optional, keyword-only
         Print a progress line per batch to stderr (default: when more than 4 batches).
+    cos_incident : float in (0, 1], keyword-only
+        Cosine of the beam's direction to the normal *outside* (default 1: along the normal).
+        It refracts into the medium; every result stays per unit *entering* flux (the entry
+        Fresnel loss is not counted), and radii are measured from the entry point.
 
     Returns
     -------
@@ -99,12 +103,15 @@ def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=No
     """
     if medium.shape != ():
         raise ValueError(f"random_walk needs a single-channel medium; got shape {medium.shape}.")
+    if not (0 < cos_incident <= 1):
+        raise ValueError(f"random_walk(cos_incident=...) must lie in (0, 1]; got {cos_incident!r}.")
     # One layer whose index is 1 inside, seen through the given relative indices outside.
     eta_top = medium.eta if eta_top is None else eta_top
     eta_bottom = medium.eta if eta_bottom is None else eta_bottom
+    cos_inside = float(np.sqrt(1 - (1 - cos_incident**2) / float(eta_top) ** 2))  # Snell
     return _run([medium], [thickness], g=g, eta_above=1.0 / eta_top, eta_below=1.0 / eta_bottom, relative=True,
                 n_photons=n_photons, batch_size=batch_size, max_steps=max_steps, bin_edges=bin_edges, seed=seed,
-                progress=progress)
+                progress=progress, cos_start=cos_inside)
 
 
 def random_walk_layers(layers, base: Medium | None = None, *, g: float = 0.0, eta_above: float = 1.0,
@@ -138,7 +145,7 @@ def _params(media, thicknesses, *, g, eta_above, eta_below, relative):
 
 
 def _run(media, thicknesses, *, g, eta_above, eta_below, relative, n_photons, batch_size, max_steps, bin_edges,
-         seed, progress):
+         seed, progress, cos_start=1.0):
     for m in media:
         if m.shape != ():
             raise ValueError(f"random_walk needs single-channel media; got shape {m.shape}.")
@@ -147,6 +154,8 @@ def _run(media, thicknesses, *, g, eta_above, eta_below, relative, n_photons, ba
     if any(not (d > 0) for d in thicknesses):
         raise ValueError(f"random_walk(thickness=...) must be > 0 [mm]; got {thicknesses!r}.")
     params = _params(media, thicknesses, g=g, eta_above=eta_above, eta_below=eta_below, relative=relative)
+    if cos_start != 1.0:
+        params = params + (jnp.asarray(cos_start, params[0].dtype),)
     mfp = float(min(float(m.mean_free_path) for m in media))
     if bin_edges is None:
         bin_edges = np.concatenate([[0.0], np.geomspace(0.01 * mfp, 100 * mfp, 64), [np.inf]])

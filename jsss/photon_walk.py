@@ -131,10 +131,19 @@ class _Lane(NamedTuple):
     photon: jax.Array     # int32 photon index; == n_photons: idle lane
 
 
-def _fresh(photon, dtype):
+def _fresh(photon, dtype, cos_start=1.0):
+    """A photon just inside the top at the origin, travelling down at ``cos_start`` to the normal
+    (1: a beam along the normal; less: an oblique beam after refraction, tilted towards +x)."""
     zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
-    return _Lane(zero, zero, zero, zero, zero, one, one, jnp.int32(0), zero, zero, zero, jnp.int32(0),
+    cos_start = jnp.asarray(cos_start, dtype)
+    sin_start = jnp.sqrt(jnp.maximum(1 - cos_start**2, 0.0))
+    return _Lane(zero, zero, zero, sin_start, zero, cos_start, one, jnp.int32(0), zero, zero, zero, jnp.int32(0),
                  jnp.bool_(False), jnp.int32(0), photon)
+
+
+def _start_cosine(params):
+    """The optional ninth entry of ``params``: the cosine at which photons start inside (default 1)."""
+    return params[8] if len(params) > 8 else 1.0
 
 
 _ROTATIONS = (13, 15, 26, 6, 17, 29, 16, 24)
@@ -178,7 +187,7 @@ def _at_layer(values, layer):
 
 def _event(lane: _Lane, key, params) -> _Lane:
     """Advance one lane by one event (a collision or a boundary)."""
-    sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below = params
+    sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below = params[:8]
     n_layers = sigma_t.shape[0]
     layer = lane.layer
     dtype = lane.z.dtype
@@ -276,7 +285,7 @@ def _advance(lanes: _Lane, next_id, issue_limit, n_photons, key, params, max_ste
         wants = finished | ~active
         issued = next_id + jnp.cumsum(wants, dtype=jnp.int32) - 1
         new_photon = jnp.where(issued < issue_limit, issued, n_photons)
-        fresh = jax.vmap(_fresh, in_axes=(0, None))(new_photon, dtype)
+        fresh = jax.vmap(_fresh, in_axes=(0, None, None))(new_photon, dtype, _start_cosine(params))
         lanes = jax.tree.map(lambda f, m: jnp.where(wants.reshape((-1,) + (1,) * (f.ndim - 1)), f, m), fresh, moved)
         next_id = jnp.minimum(next_id + jnp.sum(wants, dtype=jnp.int32), issue_limit)
         return lanes, records, count, next_id
@@ -291,7 +300,8 @@ def run_walk(params, *, n_photons: int, lanes: int = 4096, max_steps: int = 2000
     """Walk ``n_photons`` photons through the stack described by ``params``; one record each.
 
     ``params`` = (sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below), per layer
-    arrays of one dtype (see :mod:`jsss.montecarlo`). A photon still inside after
+    arrays of one dtype (see :mod:`jsss.montecarlo`), optionally followed by the cosine at which
+    photons start inside (an oblique beam after refraction; default 1, along the normal). A photon still inside after
     ``max_steps`` events or ``max_path`` [mm] of path is recorded as lost (side 0). Progress
     is printed to stderr when ``progress`` (default: runs of more than 64 photons per lane).
     """
@@ -304,7 +314,8 @@ def run_walk(params, *, n_photons: int, lanes: int = 4096, max_steps: int = 2000
     count = jnp.int32(n_photons)
     max_steps, max_path = jnp.int32(max_steps), jnp.asarray(max_path, dtype)
     shown = progress if progress is not None else n_photons > 64 * lanes
-    state = jax.vmap(_fresh, in_axes=(0, None))(jnp.full(lanes, n_photons, jnp.int32), dtype)  # all idle
+    state = jax.vmap(_fresh, in_axes=(0, None, None))(jnp.full(lanes, n_photons, jnp.int32), dtype,
+                                                      _start_cosine(params))  # all idle
     next_id, issued, done = jnp.int32(0), 0, 0
     start, steps, chunks = time.perf_counter(), 0, []
     while True:

@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..fresnel import fresnel_transmittance
+from ..incidence import incidence_ratio
 from .mesh import Mesh
 from .raster import OrthographicView, PerspectiveView, rasterize, surface_attributes
 
@@ -171,8 +172,13 @@ def light_geometry(positions, normals, valid, light: Light, shadow: ShadowMap) -
     )
 
 
-def irradiance(lights: list[LightGeometry], radiant, eta):
+def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None):
     """Light transmitted into the surface at each point (..., C).
+
+    With ``medium`` (a homogeneous Medium) each light's share is scaled by how much more of it
+    the half space returns for its angle than for a normal beam
+    (:func:`jsss.incidence.incidence_ratio`): the profiles are for normal incidence, so this
+    is the irradiance a normal beam would need to return the same light.
 
     Parameters
     ----------
@@ -186,6 +192,8 @@ def irradiance(lights: list[LightGeometry], radiant, eta):
     for i, g in enumerate(lights):
         cos = jnp.clip(jnp.asarray(g.cosine, radiant.dtype), 0.0, 1.0)
         transmitted = fresnel_transmittance(cos[..., None], eta)
+        if medium is not None:
+            transmitted = transmitted * incidence_ratio(medium, cos)
         weight = (cos * jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None]
         total = total + radiant[i] * weight * transmitted
     return total

@@ -95,20 +95,31 @@ def _tabulated_profile(material, r_max):
     return r, values
 
 
-def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, chunk: int = 128) -> ReferenceFrame:
-    """The diffuse radiance of ``scene`` by brute-force surface integration (float64 if enabled)."""
+def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, chunk: int = 128,
+                       oblique: bool | None = None) -> ReferenceFrame:
+    """The diffuse radiance of ``scene`` by brute-force surface integration (float64 if enabled).
+
+    ``oblique``: scale the irradiance by the oblique-incidence law (:mod:`jsss.incidence`);
+    default: where the planner would at the scene's accuracy, so that a frame is compared
+    with the same physics it was planned to simulate.
+    """
+    from .planner import oblique_incidence_decision
+
     mesh, material = scene.mesh, scene.material
+    if oblique is None:
+        oblique = oblique_incidence_decision(material, scene.accuracy)[0]
+    oblique_medium = material.medium if oblique and material.medium is not None else None
     buffers = camera_buffers(mesh, scene.camera)
     maps = [shadow_map(mesh, light, size=scene.shadow_map_size) for light in scene.lights]
     radiant = jnp.asarray(np.array([np.asarray(l.color) * l.intensity for l in scene.lights]), float)
     eta = jnp.broadcast_to(jnp.asarray(material.eta, float), (3,))
     pixel_lights = [light_geometry(buffers.position, buffers.normal, buffers.mask, light, m)
                     for light, m in zip(scene.lights, maps)]
-    E_pixel = np.asarray(irradiance(pixel_lights, radiant, eta))
+    E_pixel = np.asarray(irradiance(pixel_lights, radiant, eta, medium=oblique_medium))
     position, normal, area = surface_samples(mesh, samples, seed=seed)
     sample_lights = [light_geometry(position, normal, np.ones(len(position), bool), light, m)
                      for light, m in zip(scene.lights, maps)]
-    E_samples = np.asarray(irradiance(sample_lights, radiant, eta))
+    E_samples = np.asarray(irradiance(sample_lights, radiant, eta, medium=oblique_medium))
     lo, hi = mesh.bounds
     r, table = _tabulated_profile(material, 2 * float(np.linalg.norm(hi - lo)))
     near = 3 * np.sqrt(area / samples)

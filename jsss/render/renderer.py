@@ -47,6 +47,8 @@ class RenderParams(eqx.Module):
     profile : SampledProfile, the exact profile the pixel methods integrate (the dipole of a
         homogeneous material, else the Gaussian sum above)
     medium : Medium or None, a homogeneous material's medium (for the single-scattering pass)
+    oblique : Medium or None, the medium whose oblique-incidence law scales the irradiance
+        (:func:`jsss.incidence.incidence_ratio`), when the plan turns that pass on
     """
 
     weights: jax.Array
@@ -55,6 +57,7 @@ class RenderParams(eqx.Module):
     eta: jax.Array
     profile: SampledProfile
     medium: Medium | None = None
+    oblique: Medium | None = None
 
 
 def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, radii=None) -> RenderParams:
@@ -78,7 +81,8 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
         profile = SampledProfile(medium=medium)
     else:
         profile = SampledProfile(weights=weights, variances=variances)
-    return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile, medium)
+    oblique = medium if medium is not None and plan.on("oblique incidence") else None
+    return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile, medium, oblique)
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,7 +140,7 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
 
 def irradiance_pass(params: RenderParams, prep: Prepared):
     lights = [g.astype(params.radiant.dtype) for g in prep.texel_lights]
-    return irradiance(lights, params.radiant, params.eta)
+    return irradiance(lights, params.radiant, params.eta, medium=params.oblique)
 
 
 def diffusion_pass(params: RenderParams, prep: Prepared, plan: Plan, E):
@@ -265,6 +269,7 @@ def _render_pixels(scene: Scene, plan: Plan, *, dtype, timings: dict, time_passe
     prep = prepare_pixels(scene, plan.method, params.profile, normal_filter=plan.normal_filter, timings=timings)
     material = scene.material
     frame = jax.jit(lambda p: pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples,
+                                             oblique=p.oblique,
                                              specular=plan.on("specular"), roughness=material.roughness,
                                              specular_weight=material.specular,
                                              single_scattering=plan.on("single scattering"), medium=p.medium))

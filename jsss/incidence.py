@@ -1,0 +1,134 @@
+r"""How much light a half space returns when it arrives obliquely: Chandrasekhar's H function.
+
+The profiles (dipole, transport tables) are for light arriving along the normal. Light that
+arrives at a grazing angle is deposited nearer the surface and more of it comes back out:
+for isotropic scattering with albedo :math:`\omega` in an index-matched half space the total
+reflectance per unit entering flux is exactly (Chandrasekhar 1960, *Radiative Transfer*, ch. IV)
+
+.. math:: A(\mu_0) = 1 - H(\mu_0)\,\sqrt{1 - \omega},
+
+with :math:`\mu_0` the cosine of the incoming direction and :math:`H` the solution of
+
+.. math:: \frac{1}{H(\mu)} = \sqrt{1 - \omega}
+          + \frac{\omega}{2}\int_0^1 \frac{\mu'\,H(\mu')}{\mu + \mu'}\,d\mu'.
+
+At :math:`\omega = 0.75` (ketchup's red) :math:`A` grows from 0.243 at normal incidence to
+0.283 at :math:`\mu_0 = 0.7` and 0.319 at 0.5: a renderer that scales every irradiance by the
+normal-incidence total is 17-31 % short there. At :math:`\omega = 0.999` (marble) the growth
+is 1.6-2.7 %.
+
+The renderer uses the ratio :math:`A(\mu)/A(1)` with the similarity albedo
+:math:`\sigma_s'/\sigma_t'` (the model the profiles are given in). Behind a Fresnel boundary it
+takes the refracted cosine, which ignores the boundary's internal reflections; those make the
+returning light more diffuse, so the ratio is then an upper bound on the growth
+(``tests/jsss/test_incidence.py`` measures both against random walks at oblique incidence:
+exact at eta 1, 1.6-2.8 points high at 66 degrees behind eta 1.3 and 1.5).
+
+The renderer takes only the total from here. The *angle* at which the multiply scattered light
+leaves still follows the exit lobe of :mod:`jsss.render.shading`, and the whole reflection of an
+index-matched half space, :func:`index_matched_brdf`, is brighter than that at slanted light
+and view (12-16 % for albedo 0.75 at 45-60 degrees); Mitsuba's frames of such a plane agree
+with :func:`index_matched_brdf` to 0.05 %.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .medium import Medium
+from .numerics import as_float_array, safe_sqrt
+
+__all__ = ["h_function", "incidence_ratio", "index_matched_brdf", "plane_albedo"]
+
+NODES = 48          # Gauss-Legendre nodes on [0, 1]
+ITERATIONS = 400    # the 1/H form converges geometrically; at albedo 1 it is slowest (1e-9 by 300)
+
+
+def _nodes(dtype):
+    x, w = np.polynomial.legendre.leggauss(NODES)
+    return jnp.asarray((x + 1) / 2, dtype), jnp.asarray(w / 2, dtype)
+
+
+def h_function(albedo, mu):
+    r"""Chandrasekhar's H function for isotropic scattering, :math:`H(\mu)` at ``mu`` in [0, 1].
+
+    ``albedo`` (shape ``C``) in [0, 1]; ``mu`` (shape ``S``) broadcast against it: the result
+    has shape ``S + C``. Solved on Gauss-Legendre nodes by iterating the :math:`1/H` form (a
+    fixed number of steps, so ``jax.grad`` goes through it), then extended to ``mu`` by the
+    same equation (Nystrom). Accurate to 1e-7 against its own moment identity
+    :math:`\int_0^1 H\,d\mu = (2/\omega)(1 - \sqrt{1-\omega})` for albedos up to 0.999;
+    an albedo of 1 is taken as :math:`1 - 10^{-12}` (the iteration has no fixed scale there).
+    """
+    mu = as_float_array(mu)
+    dtype = jnp.result_type(as_float_array(albedo), mu)
+    # At albedo 1 the 1/H iteration has no fixed scale (root = 0); 1 - 1e-12 changes H by 1e-6.
+    albedo = jnp.minimum(as_float_array(albedo), 1 - 1e-12)
+    nodes, weights = _nodes(dtype)
+    root = safe_sqrt(jnp.maximum(1 - albedo, 0.0))[..., None]              # C + (1,)
+    half = (albedo / 2)[..., None]
+    kernel = nodes[None, :] * weights[None, :] / (nodes[:, None] + nodes[None, :])  # (nodes, nodes)
+
+    def step(_, H):
+        return 1.0 / (root + half * (H[..., None, :] * kernel).sum(-1))
+
+    H = jax.lax.fori_loop(0, ITERATIONS, step, jnp.ones(albedo.shape + (NODES,), dtype))
+    # At mu: 1/H(mu) = root + albedo/2 sum_j w_j mu_j H_j / (mu + mu_j); mu = 0 gives H = 1.
+    flat = mu.reshape(-1)
+    terms = (weights * nodes) / (flat[:, None] + nodes[None, :])             # (S, nodes)
+    inverse = root[None, ..., 0] + half[None, ..., 0] * jnp.einsum("sj,...j->s...", terms, H)
+    return (1.0 / inverse).reshape(mu.shape + albedo.shape)
+
+
+def plane_albedo(albedo, mu):
+    r"""Total reflectance :math:`1 - H(\mu)\sqrt{1-\omega}` of an index-matched half space for
+    light arriving at cosine ``mu`` (all orders of scattering, per unit entering flux). Shape
+    ``S + C`` as :func:`h_function`."""
+    albedo = as_float_array(albedo)
+    return 1.0 - h_function(albedo, mu) * safe_sqrt(jnp.maximum(1 - albedo, 0.0))
+
+
+def index_matched_brdf(albedo, cos_incident, cos_exit):
+    r"""The whole reflection (every order of scattering) of a uniformly lit, index-matched half
+    space with isotropic scattering, as a BRDF [1/sr] (Chandrasekhar 1960, eq. IV.(29)):
+
+    .. math:: f_r(\mu, \mu_0) = \frac{\omega\,H(\mu)\,H(\mu_0)}{4\pi\,(\mu + \mu_0)},
+
+    the single-scattering BRDF times :math:`H(\mu)H(\mu_0)`; it does not depend on the
+    azimuth. ``albedo`` (shape ``C``); the cosines broadcast together (shape ``S``); the
+    result is ``S + C``. A closed-form truth for a path tracer's frames of a large flat
+    object (``benchmarks/transport_truth.py``) and the far field of the profiles.
+    """
+    albedo = as_float_array(albedo)
+    cos_incident, cos_exit = jnp.broadcast_arrays(as_float_array(cos_incident), as_float_array(cos_exit))
+    both = jnp.stack([cos_incident, cos_exit])
+    H = h_function(albedo, both)
+    n = len(jnp.shape(albedo))
+    path = (cos_incident + cos_exit).reshape(cos_incident.shape + (1,) * n)
+    return albedo * H[0] * H[1] / (4 * jnp.pi * path)
+
+
+def incidence_ratio(medium: Medium, cos_incident):
+    r"""Total reflectance at incidence ``cos_incident`` (outside) over that at normal incidence,
+    per channel: the factor by which oblique light returns more than the profiles' normal beam.
+
+    ``cos_incident`` (shape ``S``) is refracted by ``medium.eta`` (shape ``C``) first; the
+    result has shape ``S + C`` and is 1 at normal incidence. Uses the similarity albedo
+    :math:`\sigma_s'/(\sigma_a + \sigma_s')`. Exact for isotropic scattering behind an
+    index-matched boundary; behind a Fresnel boundary an upper bound (see the module notes).
+    """
+    cos = jnp.clip(as_float_array(cos_incident), 0.0, 1.0)
+    eta = medium.eta
+    albedo = medium.sigma_s_prime / (medium.sigma_a + medium.sigma_s_prime)
+    n = len(jnp.shape(albedo))
+    cos_b = cos.reshape(cos.shape + (1,) * n)
+    inside = safe_sqrt(jnp.maximum(1 - (1 - cos_b**2) / jnp.square(eta), 0.0))   # S + C, Snell
+    # The H solve is per channel, and a frame has ~10^5 points: A is evaluated on 257
+    # cosines once and interpolated linearly (within 1e-6 of it: A is smooth in mu).
+    grid = jnp.linspace(0.0, 1.0, 257, dtype=albedo.dtype)
+    table = plane_albedo(albedo, grid).reshape(257, -1)                      # (257, channels)
+    normal = plane_albedo(albedo, jnp.ones((), albedo.dtype)).reshape(-1)    # (channels,)
+    flat = jnp.broadcast_to(inside, cos.shape + jnp.shape(albedo)).reshape(cos.shape + (-1,))
+    value = jnp.stack([jnp.interp(flat[..., c], grid, table[:, c]) / normal[c] for c in range(table.shape[1])], -1)
+    return value.reshape(cos.shape + jnp.shape(albedo))
