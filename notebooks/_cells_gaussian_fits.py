@@ -19,6 +19,21 @@ from jsss.gaussians import empirical_dipole_fit, evaluate, relative_rms_error
 from jsss.materials import jensen2001, jensen2001_names
 from fitting import fit_gaussians, jensen2001_profiles, radial_grid
 """),
+    ("md", """
+## Why Gaussians, and how their error is measured
+
+A 2D Gaussian G_v(r) = exp(-r^2 / 2v) / (2 pi v) is the only radially symmetric kernel that
+is also separable (a horizontal blur followed by a vertical one), and blurring by v1 then by
+v2 is blurring by v1 + v2. So a renderer can diffuse a texture with a chain of cheap 1D
+blurs and take every Gaussian of the sum from one step of the chain (d'Eon 2007 sec. 5).
+The price is that the profile becomes sum_i w_i G_{v_i}(r), and a profile with a sharp core
+and a long tail needs several terms spread over decades of variance.
+
+d'Eon's error measures the profile as light is applied: the power error
+int r (R - sum w G)^2 dr relative to int r R^2 dr. The factor r weights each radius by the
+ring of surface it covers. In the plots, 2 pi r R(r) is the light leaving per unit radius:
+its integral over r is the total reflectance.
+"""),
     ("md", "## Marble, green channel: the profile, its fits and their residuals (scaled by 2 pi r, as light is applied radially)"),
     ("code", """
 marble = jensen2001("marble")
@@ -40,7 +55,14 @@ top.set(ylim=(1e-5, 2), ylabel="2 pi r R(r) [1/mm]")
 bottom.set(xlabel="r [mm]", ylabel="residual x 2 pi r")
 top.legend(fontsize=8); bottom.legend(fontsize=8);
 """),
-    ("md", "## The error table: four Gaussians for each of the 36 channels (d'Eon reports 0.0793 % to 1.52 %)"),
+    ("md", """
+## The error table: four Gaussians for each of the 36 channels (d'Eon reports 0.0793 % to 1.52 %)
+
+One fit with four shared variances for all 36 channels (12 materials x RGB), as a renderer
+needs (every channel is blurred with the same Gaussians; only the weights differ per
+channel). The channels whose profiles span the most decades (low absorption, long tails)
+carry the largest errors.
+"""),
     ("code", """
 names = jensen2001_names()
 radii, profiles, labels = jensen2001_profiles()

@@ -22,9 +22,43 @@ fast = os.environ.get("JSSS_FULL") != "1"  # JSSS_FULL=1: 100 000 photons, a 5 x
 photons = 4000 if fast else 100_000
 """),
     ("md", """
+## What diffusion assumes
+
+Light in a turbid medium is described by the radiative transfer equation: radiance
+L(x, w) changes along a ray by absorption (sigma_a), by scattering away (sigma_s) and by
+light scattered into it through the phase function. Diffusion theory keeps only the first
+two angular moments of L, the fluence phi and the flux vector E, and closes the system with
+Fick's law E = -D grad phi, D = 1 / (3 sigma_t'). That is exact only when the radiance is
+nearly isotropic, which needs many scattering events: far from sources and boundaries, at
+high albedo sigma_s' / sigma_t'.
+
+The dipole (Jensen et al. 2001) turns a beam entering a half space into one isotropic point
+source at depth z_r = 1 / sigma_t' (one transport mean free path, where the beam's first
+collisions happen on average) and a negative image source above the surface, at the
+extrapolated boundary where the fluence would vanish (its height depends on eta through the
+internal Fresnel reflection). The profile R(r) is the flux leaving at distance r. Three
+consequences to look for in the plots below:
+
+* **near the source** (r below a few mean free paths), light has scattered only a few times;
+  diffusion misplaces it (the dipole's core is a property of its point source, not of the
+  beam);
+* **at low albedo**, most light leaves after one or two collisions, with an angular law
+  diffusion does not have; the total reflectance is wrong by tens of percent;
+* **with an index mismatch**, the boundary condition is an approximation to the Fresnel
+  reflection of an anisotropic radiance.
+
+The random walk makes none of these assumptions: photons fly exponential distances,
+scatter isotropically (or Henyey-Greenstein), and meet the boundary with the exact Fresnel
+probability for their angle.
+"""),
+    ("md", """
 ## Three Jensen materials (one channel each): semi-infinite and a 2 mm slab
 
-Solid: Monte Carlo; dashed: dipole (semi-infinite); dotted: multipole (2 mm slab).
+Markers: Monte Carlo with its standard errors; dashed: dipole (semi-infinite); dotted:
+multipole (a 2 mm slab, with image sources mirrored at both boundaries, Donner & Jensen
+2005). Marble (high albedo) follows diffusion except in its first tenth of a millimetre;
+ketchup's red (albedo' 0.75) departs everywhere. The slab loses the light that the half
+space would have sent back from below 2 mm, which shows at radii beyond the thickness.
 """),
     ("code", """
 choices = [("marble", 1), ("skin1", 0), ("ketchup", 0)]
@@ -46,7 +80,15 @@ for ax, (name, channel) in zip(axes, choices):
 axes[0].set_ylabel("R(r) [1/mm^2]")
 axes[0].legend(fontsize=7);
 """),
-    ("md", "## Error map: the dipole's total reflectance against Monte Carlo over albedo and index"),
+    ("md", """
+## Error map: the dipole's total reflectance against Monte Carlo over albedo and index
+
+Each cell is one walk against `dipole.total_reflectance` (the integral of R(r)). Read it as
+a rule of thumb for when diffusion is good enough: above albedo' 0.95 the total is within a
+few percent at every index; below 0.8 it is not. Where it is not, use
+`profile_model = "transport"` (tables exact to transport, `jsss.transport`), or fit
+measurements with the transport model (`fit-params --model transport`, the default).
+"""),
     ("code", """
 albedos = [0.5, 0.8, 0.95, 0.99] if fast else [0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995]
 etas = [1.0, 1.5] if fast else [1.0, 1.2, 1.3, 1.4, 1.5]
@@ -63,5 +105,31 @@ ax.set(xticks=range(len(albedos)), xticklabels=albedos, yticks=range(len(etas)),
        xlabel="reduced albedo", ylabel="eta", title="dipole total reflectance error vs MC [%]")
 fig.colorbar(image, label="dipole / Monte Carlo - 1 [%]")
 print(np.round(100 * errors, 1))
+"""),
+    ("md", """
+## Light that arrives at a slant
+
+Every profile here is for a beam along the normal. Light arriving at an angle theta is
+deposited nearer the surface, so more of it comes back. For isotropic scattering in an
+index-matched half space the total reflectance is known exactly (Chandrasekhar 1960):
+A(mu0) = 1 - H(mu0) sqrt(1 - albedo), mu0 = cos theta, with Chandrasekhar's H function
+(`jsss.incidence`). The renderer scales each light's irradiance by A(mu0) / A(1), its
+"oblique incidence" pass. The walk below starts photons at the given angle and checks it.
+"""),
+    ("code", """
+from jsss.incidence import plane_albedo
+cosines = np.linspace(0.1, 1.0, 50)
+fig, ax = plt.subplots(figsize=(6, 3.4))
+for albedo, colour in [(0.75, "tab:red"), (0.95, "tab:green"), (0.999, "tab:blue")]:
+    ax.plot(cosines, np.asarray(plane_albedo(albedo, cosines)) / float(plane_albedo(albedo, 1.0)), color=colour,
+            label=f"H function, albedo {albedo}")
+    for mu in (1.0, 0.6, 0.3):
+        walk = random_walk(Medium(1 - albedo, albedo, 1.0), cos_incident=mu, n_photons=photons, max_steps=5000,
+                           seed=int(100 * mu), progress=False)
+        ax.errorbar(mu, walk.R / float(plane_albedo(albedo, 1.0)), yerr=walk.R_err / float(plane_albedo(albedo, 1.0)),
+                    fmt="o", ms=4, color=colour)
+ax.set(xlabel="cosine of the incoming light", ylabel="reflectance / at normal incidence",
+       title="oblique incidence (markers: random walks, eta = 1)")
+ax.legend(fontsize=7);
 """),
 ]

@@ -22,6 +22,10 @@ r = np.asarray(grid.r)
 
 A slab much thinner than the diffusion length reflects less than a semi-infinite block of
 the same medium and transmits the rest. As the slab thickens, R(r) approaches the dipole.
+
+The multipole (Donner & Jensen 2005) satisfies the boundary condition at *both* faces: the
+dipole's pair of sources is mirrored again and again about the two extrapolated boundaries,
+an infinite series whose terms fall off fast (a dozen pairs suffice for these slabs).
 """),
     ("code", """
 medium = Medium(0.01, 1.0, 1.4)
@@ -39,6 +43,12 @@ ax.legend(fontsize=8);
 
 A strongly absorbing thin layer over a clear one: Kubelka-Munk in frequency space adds
 up all inter-layer bounces.
+
+Light crossing from one layer into the next and back is a convolution of profiles; in
+frequency space (the Hankel transform of a radial profile) convolutions become products, and
+the infinite series of bounces between two layers, R1 + T1 R2 T1 + T1 R2 R1 R2 T1 + ...,
+sums to R1 + T1^2 R2 / (1 - R1 R2) at each frequency (d'Eon 2007 after Donner & Jensen
+2005). One inverse transform gives R(r) of the stack.
 """),
     ("code", """
 top = Layer(Medium(0.3, 2.0, 1.4), 0.2)

@@ -36,7 +36,25 @@ for ax, image, title in zip(axes, (measurement, reference), ("marble", "white re
     ax.imshow(np.log10(np.clip(image[..., 1] - dark[..., 1], 1e-6, None)), cmap="magma")
     ax.set_title(title + " (log10, green)"); ax.axis("off")
 """),
-    ("md", "## Calibrate, bin, fit"),
+    ("md", """
+## Calibrate, bin, fit
+
+What the camera records is **radiance toward itself**, not the exitance R(r) of the dipole:
+pixel value = K L(r, theta). The white reference removes K: the same beam on a diffuser of
+known reflectance rho returns radiance rho E / pi, so dividing by the reference's sum over
+the image turns pixel values into radiance per unit incident flux. `fit_measurement` then
+
+* finds the beam's centre and width on the reference (a Gaussian);
+* bins the calibrated pixels in rings around the centre (log-spaced, from just outside the
+  beam to where the signal meets the noise), with each ring's standard error from the
+  photon and read noise of its pixels;
+* fits sigma_a and sigma_s' by Levenberg-Marquardt: the model is the profile convolved
+  with the measured beam, in the Hankel domain, averaged over each ring's pixels.
+
+sigma_s' mostly sets the profile's shape near the beam, sigma_a its decay far out: the
+decay length is the diffusion length 1 / sqrt(3 sigma_a sigma_t'). A field of view shorter
+than about two diffusion lengths leaves sigma_a poorly determined, and `fit-params` warns.
+"""),
     ("code", """
 result = fit_measurement(measurement, reference, 0.05, 1.5, dark=dark, grid=grid)
 table = result.table()
