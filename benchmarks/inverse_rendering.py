@@ -2,19 +2,25 @@
 
     pip install -e '.[truth]' && python benchmarks/inverse_rendering.py [--quick]
 
-The "photo" is Mitsuba 3's volumetric path tracing of the scene (the subsurface light of
-`transport_truth.py`: medium frame minus absorbing-interior frame, smooth-interface limit),
-so nothing in it comes from jsss's profiles or shading. Each pixel's noise is known from
-the path tracer's independent chunks; 1 % Gaussian noise is added on top (the issue's
-"photo noise"). jsss then fits sigma_a and sigma_s' per channel and an unknown exposure gain
-with `fitting.fit_render` (specular off on both sides: the photo holds subsurface light
-only), once with the dipole and once with the transport profile.
+The "photo" is Mitsuba 3's volumetric path tracing of the scene, so nothing in it comes from
+jsss's profiles or shading. By default the object is **index-matched** (eta set to 1 in the
+photo and in the fit, a ``null`` boundary in Mitsuba): a path tracer's next-event estimation
+then reaches the lights from every scattering vertex, and 4 x 256 spp give 2.4 % noise per
+pixel at 320 x 240 (1.2 % in the 2 x 2 tiles fitted). Through the scenes' own dielectric
+(``--interface dielectric``: rough dielectrics extrapolated to smooth, as in
+`transport_truth.py`) a point or directional light is reached only where a path leaves the
+surface, and the noise was 45-102 % per pixel at 1024 spp. Each pixel's noise is known from
+the path tracer's independent chunks; ``--noise`` adds relative Gaussian noise on top (default
+0: the photo's own noise is already at the issue's 1 % level once tiled).
 
-Printed per scene and profile model: total diffuse reflectance R_d and mean free path
-1/sigma_t' per channel, fitted / true - 1, with the stated standard error (both R_d from the
-transport tables, the truth's own model), the number of solver steps and seconds per fit
-(after compilation). The fit starts from 2x the true absorption and 2/3 of the scattering. The path-traced frames are cached in
-``--cache`` (default ``$TMPDIR/jsss_inverse_truth``) so a second run only fits.
+jsss then fits sigma_a and sigma_s' per channel, with the exposure gain fitted or held at 1
+(Mitsuba's frames are in jsss's units), with ``fitting.fit_render`` (specular off on both
+sides: the photo holds subsurface light only), once with the dipole and once with the
+transport profile. Printed per scene: R_d and mean free path 1/sigma_t' per channel, fitted /
+true - 1 with the stated standard error (R_d of both from the transport tables), chi^2/dof,
+solver steps and seconds per fit after compilation. The fit starts from 2x the true
+absorption and 2/3 of the scattering. Path-traced frames are cached in ``--cache`` (default
+``$TMPDIR/jsss_inverse_truth``), so a second run only fits.
 """
 
 from __future__ import annotations
@@ -103,16 +109,16 @@ def main(argv=None):
     from fitting import fit_render
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="40 x 30 pixels, 2 chunks x 128 spp")
+    parser.add_argument("--quick", action="store_true", help="80 x 60 pixels, 2 chunks x 64 spp")
     parser.add_argument("--spp", type=int, default=256)
     parser.add_argument("--chunks", type=int, default=4)
-    parser.add_argument("--size", type=int, nargs=2, default=(80, 60), metavar=("W", "H"))
+    parser.add_argument("--size", type=int, nargs=2, default=(320, 240), metavar=("W", "H"))
     parser.add_argument("--scenes", nargs="*", default=["marble_sphere", "ketchup_plane"])
     parser.add_argument("--profiles", nargs="*", default=["dipole", "transport"], choices=["dipole", "transport"])
-    parser.add_argument("--noise", type=float, default=0.01,
+    parser.add_argument("--noise", type=float, default=0.0,
                         help="relative photo noise added to the path-traced frame (on top of its own)")
     parser.add_argument("--cache", default=os.path.join(tempfile.gettempdir(), "jsss_inverse_truth"))
-    parser.add_argument("--block", type=int, default=4,
+    parser.add_argument("--block", type=int, default=2,
                         help="fit path-traced photos summed over BLOCK^2 pixel tiles (their noise is heavy-tailed)")
     parser.add_argument("--variant", default="auto", choices=["auto", "llvm_ad_rgb", "scalar_rgb"],
                         help="Mitsuba variant (auto: LLVM with libLLVM 19, else scalar)")
@@ -120,11 +126,11 @@ def main(argv=None):
     parser.add_argument("--interface", default="index-matched", choices=["index-matched", "dielectric"],
                         help="index-matched: eta set to 1 on both sides (the path tracer's noise is low); "
                              "dielectric: the scene's eta, extrapolated from rough dielectrics (noisy)")
-    parser.add_argument("--consistency-size", type=int, nargs=2, default=(320, 240), metavar=("W", "H"),
-                        help="size of the jsss-rendered photo that times a full-size fit")
+    parser.add_argument("--consistency", action="store_true",
+                        help="also fit a jsss transport render (+1 %% noise) of the same size: the fit's own consistency")
     args = parser.parse_args(argv)
-    width, height = (40, 30) if args.quick else args.size
-    spp, chunks = (128, 2) if args.quick else (args.spp, args.chunks)
+    width, height = (80, 60) if args.quick else args.size
+    spp, chunks = (64, 2) if args.quick else (args.spp, args.chunks)
     print(f"inverse rendering against path-traced photos, {width}x{height}, {chunks} x {spp} spp, "
           f"+{100 * args.noise:.0f} % noise, {time.strftime('%Y-%m-%d')}")
     rng = np.random.default_rng(0)
@@ -144,15 +150,15 @@ def main(argv=None):
         photos = [(f"path-traced {width}x{height} (own noise {100 * rel:.0f} % per pixel, median), {args.block}^2 tiles",
                    scene, truth * (1 + args.noise * rng.standard_normal(truth.shape)),
                    noise_model(scene, truth, stderr, args.noise), args.block)]
-        if not args.quick:
-            big = tt._with_resolution(base, *args.consistency_size)
+        if args.consistency:
+            big = scene
             material = dataclasses.replace(big.material, profile_model="transport")
             big = dataclasses.replace(big, material=material)
             plan = plan_scene(big, accuracy=0.001, method="texture-space").replace("specular", False, "subsurface")
             clean = render(big, plan, dtype=jnp.float64).radiance
             photos.append((f"jsss transport render {big.camera.width}x{big.camera.height}, +1 % noise "
                            "(consistency for the transport fit; truth for the dipole's bias)", big,
-                           clean * (1 + 0.01 * rng.standard_normal(clean.shape)), None, 1))
+                           clean * (1 + 0.01 * rng.standard_normal(clean.shape)), None, args.block))
         print("| photo | profile | gain | R_d error R / G / B (stated) | mean free path error R / G / B (stated) | "
               "chi2/dof | steps | s per fit |")
         print("|---|---|---|---|---|---:|---:|---:|")
