@@ -16,8 +16,8 @@ the profile fit of the weights (:func:`jsss.render.profiles.render_profile`, dif
 in the medium), a weighted sum of those images and the per-pixel shading (single scattering
 included). The variances are planned for the starting material; if the fitted profile is not
 represented on them to the plan's accuracy, they are re-planned and the fit is repeated from
-there (at most ``replans`` times); so is the oblique-incidence law that scales the irradiance
-(:mod:`jsss.incidence`), which depends on the albedo (its change within the last round is not in
+there (at most ``replans`` times); so are the oblique-incidence law that scales the irradiance
+and the depth at which point lights are read (:mod:`jsss.incidence`), which depend on the medium (its change within the last round is not in
 the Jacobian). The pixel methods (Lambert, normal filtering, image-space)
 are differentiated through their whole frame.
 
@@ -50,6 +50,7 @@ from jsss.incidence import incidence_ratio
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
 from jsss.render import plan_scene
+from jsss.render.planner import deposit_change
 from jsss.render.image_space import camera_buffers
 from jsss.render.lighting import lookup
 from jsss.render.pixel_methods import pixel_radiance, prepare_pixels
@@ -245,7 +246,7 @@ def _texture_data(scene: Scene, plan, dtype, blur_dtype=jnp.float32) -> _Texture
     if plan.on("single scattering") and params.medium is not None:
         unit = Medium(jnp.zeros(3, dtype), jnp.ones(3, dtype), params.eta)
         single_radiance, single_exitance = single_scattering(unit, prep.pixel_normal, prep.pixel_view, lights,
-                                                             params.radiant)
+                                                             params.radiant, deposit=params.deposit)
     else:
         single_radiance = single_exitance = jnp.zeros(prep.pixel_mask.shape + (3,), dtype)
     return _TextureData(jnp.stack(images), jnp.asarray(plan.variances, dtype),
@@ -348,6 +349,7 @@ def _model_for(scene, plan, dtype, profile_model, g):
     def render(medium, data):
         p = render_params(scene, plan, medium=medium, dtype=dtype, radii=radii)
         return pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples, oblique=p.oblique,
+                              deposit=p.deposit,
                               specular=plan.on("specular"), roughness=material.roughness,
                               specular_weight=material.specular, single_scattering=plan.on("single scattering"),
                               medium=p.medium)
@@ -501,6 +503,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
             if plan.on("oblique incidence") and (moved := _incidence_moved(fit_scene, next_scene)) > accuracy:
                 # The texture-space basis holds the irradiance scaled by the round's own law.
                 changed.append(f"oblique-incidence law (moved by up to {100 * moved:.2f} %)")
+            if plan.on("deposit depth") and (moved := abs(deposit_change(next_scene)[0]
+                                                          - deposit_change(fit_scene)[0])) > accuracy:
+                changed.append(f"deposit depth (irradiance under the lamp moved by {100 * moved:.2f} %)")
         if not changed:
             break
         history.append(f"re-planned for the estimate after round {round_ + 1}: " + ", ".join(changed))

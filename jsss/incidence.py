@@ -40,7 +40,7 @@ import numpy as np
 from .medium import Medium
 from .numerics import as_float_array, safe_sqrt
 
-__all__ = ["h_function", "incidence_ratio", "index_matched_brdf", "plane_albedo"]
+__all__ = ["deposit_depth", "h_function", "incidence_ratio", "index_matched_brdf", "plane_albedo"]
 
 NODES = 48          # Gauss-Legendre nodes on [0, 1]
 ITERATIONS = 400    # the 1/H form converges geometrically; at albedo 1 it is slowest (1e-9 by 300)
@@ -132,3 +132,22 @@ def incidence_ratio(medium: Medium, cos_incident):
     flat = jnp.broadcast_to(inside, cos.shape + jnp.shape(albedo)).reshape(cos.shape + (-1,))
     value = jnp.stack([jnp.interp(flat[..., c], grid, table[:, c]) / normal[c] for c in range(table.shape[1])], -1)
     return value.reshape(cos.shape + jnp.shape(albedo))
+
+
+def deposit_depth(medium: Medium):
+    r"""Depth [mm] at which the light that comes back out was, on average, first scattered:
+    :math:`1 / (2\,\sigma_t'\,\eta)` per channel.
+
+    A beam's first collisions are exponential in depth with mean :math:`1/\sigma_t'`; light
+    that scatters once and leaves toward a normal view is weighted by
+    :math:`e^{-\sigma_t' z (1 + 1/\mu_o)}`, mean :math:`1/(2\sigma_t')` at :math:`\mu_o = 1`.
+    Behind a boundary rays bend toward the normal, and their spread at a depth is that of the
+    apparent depth :math:`z/\eta` (paraxial). Used for point lights, whose rays keep spreading
+    below the surface (:func:`jsss.render.lighting.depth_falloff`). Measured against Mitsuba on
+    the index-matched ketchup plane under its point light 35 mm up (80 x 60 px, texture space,
+    transport profile): within 8 mm of the lamp's foot jsss / Mitsuba was 1.109 / 1.022 / 1.014
+    with the light read at the surface and 0.993 / 0.995 / 0.995 at this depth; the multiply
+    scattered red (albedo' 0.75) follows the same rule as the single-scattered green and blue.
+    """
+    return 1.0 / (2.0 * (medium.sigma_a + medium.sigma_s_prime) * medium.eta)
+

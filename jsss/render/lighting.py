@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..fresnel import fresnel_transmittance
-from ..incidence import incidence_ratio
+from ..incidence import deposit_depth, incidence_ratio
 from .mesh import Mesh
 from .raster import OrthographicView, PerspectiveView, rasterize, surface_attributes
 
@@ -118,6 +118,7 @@ class LightGeometry(NamedTuple):
     front_uv : (P, 2) UV where that light entered
     behind : 1 on shadowed points with a front point, else 0
     to_light : (P, 3) unit direction from the point to the light
+    distance : distance to a point light [mm]; infinite for a directional one
     """
 
     cosine: np.ndarray
@@ -127,6 +128,7 @@ class LightGeometry(NamedTuple):
     front_uv: np.ndarray
     behind: np.ndarray
     to_light: np.ndarray
+    distance: np.ndarray
 
     def astype(self, dtype) -> "LightGeometry":
         """The same geometry as ``jnp`` arrays of ``dtype`` (what the JAX passes read)."""
@@ -141,11 +143,13 @@ def light_geometry(positions, normals, valid, light: Light, shadow: ShadowMap) -
         to_light = -np.asarray(light.direction, float) / np.linalg.norm(light.direction)
         to_light = np.broadcast_to(to_light, positions.shape)
         falloff = np.ones(positions.shape[:-1])
+        distance = np.full(positions.shape[:-1], np.inf)
     else:
         offset = np.asarray(light.position, float) - positions
         dist2 = np.maximum((offset**2).sum(-1), 1e-12)
         to_light = offset / np.sqrt(dist2)[..., None]
         falloff = 1.0 / dist2
+        distance = np.sqrt(dist2)
     cosine = np.where(valid, (np.asarray(normals) * to_light).sum(-1), 0.0)
     xy, depth = shadow.view.project(positions.reshape(-1, 3))
     n = shadow.depth.shape[0]
@@ -169,16 +173,38 @@ def light_geometry(positions, normals, valid, light: Light, shadow: ShadowMap) -
         front_uv=np.where(found[:, None], shadow.front_uv[iyc, ixc], 0.0).reshape(shape + (2,)),
         behind=(valid & found.reshape(shape)).astype(float),
         to_light=np.array(to_light),
+        distance=distance,
     )
 
 
-def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None):
+def depth_falloff(g: LightGeometry, depth, dtype):
+    r"""How much less of a point light reaches ``depth`` [mm] (shape ``C``) below each point than
+    the point itself: :math:`d^2 / (d^2 + 2\delta d\cos\theta + \delta^2)`, its inverse square at a
+    virtual point ``depth`` under the surface along the normal; 1 for a directional light.
+    Shape ``P + C``.
+
+    Light scatters below the surface, where a point light's rays have spread further: a flat
+    half space under a point light at height h gets, where the light is overhead, the
+    irradiance of a light at h + depth. Over an infinite plane the total is unchanged to first
+    order in depth / h; the light moves outward from under the lamp.
+    """
+    d = jnp.asarray(g.distance, dtype)[..., None]
+    finite = jnp.isfinite(d)
+    d = jnp.where(finite, d, 1.0)  # double where: the directional branch must not see inf
+    cos = jnp.clip(jnp.asarray(g.cosine, dtype), 0.0, 1.0)[..., None]
+    depth = jnp.asarray(depth, dtype)
+    return jnp.where(finite, d**2 / (d**2 + 2 * depth * d * cos + depth**2), 1.0)
+
+
+def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None, deposit=None):
     """Light transmitted into the surface at each point (..., C).
 
     With ``medium`` (a homogeneous Medium) each light's share is scaled by how much more of it
     the half space returns for its angle than for a normal beam
     (:func:`jsss.incidence.incidence_ratio`): the profiles are for normal incidence, so this
-    is the irradiance a normal beam would need to return the same light.
+    is the irradiance a normal beam would need to return the same light. With ``deposit`` (a
+    Medium) point lights are read at its deposit depth (:func:`depth_falloff`,
+    :func:`jsss.incidence.deposit_depth`).
 
     Parameters
     ----------
@@ -194,6 +220,8 @@ def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None):
         transmitted = fresnel_transmittance(cos[..., None], eta)
         if medium is not None:
             transmitted = transmitted * incidence_ratio(medium, cos)
+        if deposit is not None:
+            transmitted = transmitted * depth_falloff(g, deposit_depth(deposit), radiant.dtype)
         weight = (cos * jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None]
         total = total + radiant[i] * weight * transmitted
     return total

@@ -105,16 +105,17 @@ def prepare_pixels(scene: Scene, method: str, profile: SampledProfile, *, normal
 
 
 def pixel_exitance(method: str, profile: SampledProfile, radiant, eta, prep: PixelPrepared, *, samples: int = 32,
-                   seed: int = 0, oblique=None):
+                   seed: int = 0, oblique=None, deposit=None):
     """Exitance (H, W, C) of a pixel method: a pure JAX function of the profile and the lights.
-    ``oblique`` (a Medium) scales the irradiance by its oblique-incidence law."""
+    ``oblique`` (a Medium) scales the irradiance by its oblique-incidence law; with ``deposit`` (a
+    Medium) point lights are read at its deposit depth."""
     dtype = radiant.dtype
     albedo = profile.albedo().astype(dtype)
     if method == "normal filtering":
-        channels = [irradiance([g.astype(dtype) for g in lights], radiant, eta, medium=oblique)[..., c]
+        channels = [irradiance([g.astype(dtype) for g in lights], radiant, eta, medium=oblique, deposit=deposit)[..., c]
                     for c, lights in enumerate(prep.channel_lights)]
         return albedo * jnp.stack(channels, -1)
-    E = irradiance([g.astype(dtype) for g in prep.lights], radiant, eta, medium=oblique)
+    E = irradiance([g.astype(dtype) for g in prep.lights], radiant, eta, medium=oblique, deposit=deposit)
     if method == "lambert":
         return albedo * E
     if method == "image-space":
@@ -125,19 +126,21 @@ def pixel_exitance(method: str, profile: SampledProfile, radiant, eta, prep: Pix
 
 def pixel_radiance(method: str, profile: SampledProfile, radiant, eta, prep: PixelPrepared, *, samples: int = 32,
                    specular: bool = True, roughness: float = 0.35, specular_weight: float = 1.0, seed: int = 0,
-                   single_scattering: bool = False, medium=None, oblique=None):
+                   single_scattering: bool = False, medium=None, oblique=None, deposit=None):
     """Linear radiance (H, W, 3) of a pixel method.
 
     ``single_scattering`` needs the medium: ``medium`` if given (a profile model other than
     the dipole, sampled through its Gaussians), else the dipole ``profile``'s own."""
-    M = pixel_exitance(method, profile, radiant, eta, prep, samples=samples, seed=seed, oblique=oblique)
+    M = pixel_exitance(method, profile, radiant, eta, prep, samples=samples, seed=seed, oblique=oblique,
+                       deposit=deposit)
     dtype = M.dtype
     coverage = jnp.asarray(prep.buffers.coverage, dtype)
     cos_view = jnp.asarray((prep.buffers.normal * prep.buffers.view).sum(-1), dtype)
     lights = [g.astype(dtype) for g in prep.lights]
     medium = (profile.medium if medium is None else medium) if single_scattering else None
     L = surface_radiance(M, cos_view, eta, medium=medium, normals=jnp.asarray(prep.buffers.normal, dtype),
-                         view_dirs=jnp.asarray(prep.buffers.view, dtype), light_geometry=lights, radiant=radiant)
+                         view_dirs=jnp.asarray(prep.buffers.view, dtype), light_geometry=lights, radiant=radiant,
+                         deposit=deposit)
     if specular:
         L = L + specular_radiance(prep.buffers.normal, prep.buffers.view, lights, radiant, eta,
                                   roughness=roughness, weight=specular_weight)

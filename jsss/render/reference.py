@@ -103,23 +103,25 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     default: where the planner would at the scene's accuracy, so that a frame is compared
     with the same physics it was planned to simulate.
     """
-    from .planner import oblique_incidence_decision
+    from .planner import deposit_depth_decision, oblique_incidence_decision
 
     mesh, material = scene.mesh, scene.material
     if oblique is None:
         oblique = oblique_incidence_decision(material, scene.accuracy)[0]
     oblique_medium = material.medium if oblique and material.medium is not None else None
+    deposit_medium = material.medium if material.medium is not None and deposit_depth_decision(
+        scene, scene.accuracy)[0] else None
     buffers = camera_buffers(mesh, scene.camera)
     maps = [shadow_map(mesh, light, size=scene.shadow_map_size) for light in scene.lights]
     radiant = jnp.asarray(np.array([np.asarray(l.color) * l.intensity for l in scene.lights]), float)
     eta = jnp.broadcast_to(jnp.asarray(material.eta, float), (3,))
     pixel_lights = [light_geometry(buffers.position, buffers.normal, buffers.mask, light, m)
                     for light, m in zip(scene.lights, maps)]
-    E_pixel = np.asarray(irradiance(pixel_lights, radiant, eta, medium=oblique_medium))
+    E_pixel = np.asarray(irradiance(pixel_lights, radiant, eta, medium=oblique_medium, deposit=deposit_medium))
     position, normal, area = surface_samples(mesh, samples, seed=seed)
     sample_lights = [light_geometry(position, normal, np.ones(len(position), bool), light, m)
                      for light, m in zip(scene.lights, maps)]
-    E_samples = np.asarray(irradiance(sample_lights, radiant, eta, medium=oblique_medium))
+    E_samples = np.asarray(irradiance(sample_lights, radiant, eta, medium=oblique_medium, deposit=deposit_medium))
     lo, hi = mesh.bounds
     r, table = _tabulated_profile(material, 2 * float(np.linalg.norm(hi - lo)))
     near = 3 * np.sqrt(area / samples)

@@ -49,6 +49,8 @@ class RenderParams(eqx.Module):
     medium : Medium or None, a homogeneous material's medium (for the single-scattering pass)
     oblique : Medium or None, the medium whose oblique-incidence law scales the irradiance
         (:func:`jsss.incidence.incidence_ratio`), when the plan turns that pass on
+    deposit : Medium or None, the medium whose deposit depth point lights are read at
+        (:func:`jsss.render.lighting.depth_falloff`), when the plan turns that pass on
     """
 
     weights: jax.Array
@@ -58,6 +60,7 @@ class RenderParams(eqx.Module):
     profile: SampledProfile
     medium: Medium | None = None
     oblique: Medium | None = None
+    deposit: Medium | None = None
 
 
 def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, radii=None) -> RenderParams:
@@ -82,7 +85,9 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
     else:
         profile = SampledProfile(weights=weights, variances=variances)
     oblique = medium if medium is not None and plan.on("oblique incidence") else None
-    return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile, medium, oblique)
+    deposit = medium if medium is not None and plan.on("deposit depth") else None
+    return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile, medium, oblique,
+                        deposit)
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,7 +145,7 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
 
 def irradiance_pass(params: RenderParams, prep: Prepared):
     lights = [g.astype(params.radiant.dtype) for g in prep.texel_lights]
-    return irradiance(lights, params.radiant, params.eta, medium=params.oblique)
+    return irradiance(lights, params.radiant, params.eta, medium=params.oblique, deposit=params.deposit)
 
 
 def diffusion_pass(params: RenderParams, prep: Prepared, plan: Plan, E):
@@ -193,7 +198,7 @@ def camera_pass(params: RenderParams, prep: Prepared, plan: Plan, M, roughness: 
     single = plan.on("single scattering") and params.medium is not None
     L = surface_radiance(exitance, cos_view, params.eta, medium=params.medium if single else None,
                          normals=jnp.asarray(prep.pixel_normal, dtype), view_dirs=jnp.asarray(prep.pixel_view, dtype),
-                         light_geometry=lights, radiant=params.radiant)
+                         light_geometry=lights, radiant=params.radiant, deposit=params.deposit)
     if plan.on("specular"):
         L = L + specular_radiance(prep.pixel_normal, prep.pixel_view, lights, params.radiant,
                                   params.eta, roughness=roughness, weight=specular)
@@ -269,7 +274,7 @@ def _render_pixels(scene: Scene, plan: Plan, *, dtype, timings: dict, time_passe
     prep = prepare_pixels(scene, plan.method, params.profile, normal_filter=plan.normal_filter, timings=timings)
     material = scene.material
     frame = jax.jit(lambda p: pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples,
-                                             oblique=p.oblique,
+                                             oblique=p.oblique, deposit=p.deposit,
                                              specular=plan.on("specular"), roughness=material.roughness,
                                              specular_weight=material.specular,
                                              single_scattering=plan.on("single scattering"), medium=p.medium))

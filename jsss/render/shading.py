@@ -29,7 +29,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..fresnel import exit_lobe, fresnel_reflectance
+from ..incidence import deposit_depth
 from ..single_scattering import single_scattering_albedo, single_scattering_brdf_from_cosines
+from .lighting import depth_falloff
 
 __all__ = ["diffuse_radiance", "single_scattering", "specular_radiance", "surface_radiance", "tone_map"]
 
@@ -46,7 +48,7 @@ def diffuse_radiance(exitance, cos_view, eta):
 ALBEDO_NODES = 129  # cosines on which the single-scattering albedo is tabulated per frame
 
 
-def single_scattering(medium, normals, view_dirs, light_geometry, radiant):
+def single_scattering(medium, normals, view_dirs, light_geometry, radiant, *, deposit=None):
     r"""Single-scattered radiance toward the eye and exitance (both (..., C)), summed over lights.
 
     Jensen 2001 sec. 2.2 under a locally flat surface:
@@ -63,6 +65,8 @@ def single_scattering(medium, normals, view_dirs, light_geometry, radiant):
     :math:`\rho^{(1)}` depends on :math:`\cos\theta_l` alone: it is evaluated on
     ``ALBEDO_NODES`` cosines and interpolated linearly (within 2e-5 of its maximum for the
     Jensen materials, where the 16-node quadrature per pixel took 200 ms of a 320 x 240 frame).
+    With ``deposit`` (a Medium) point lights are read at its deposit depth
+    (:func:`jsss.render.lighting.depth_falloff`).
     """
     n = jnp.asarray(normals, radiant.dtype)
     v = jnp.asarray(view_dirs, radiant.dtype)
@@ -74,6 +78,8 @@ def single_scattering(medium, normals, view_dirs, light_geometry, radiant):
         to_light = jnp.asarray(g.to_light, radiant.dtype)
         cos_i = jnp.clip((n * to_light).sum(-1), 0.0, 1.0)
         arriving = (cos_i * jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None] * radiant[i]
+        if deposit is not None:
+            arriving = arriving * depth_falloff(g, deposit_depth(deposit), radiant.dtype)
         tangential = (to_light * v).sum(-1) - cos_i * cos_o
         radiance = radiance + single_scattering_brdf_from_cosines(medium, cos_i, cos_o, tangential) * arriving
         position = cos_i * (ALBEDO_NODES - 1)
@@ -86,7 +92,7 @@ def single_scattering(medium, normals, view_dirs, light_geometry, radiant):
 
 
 def surface_radiance(exitance, cos_view, eta, *, medium=None, normals=None, view_dirs=None, light_geometry=(),
-                     radiant=None):
+                     radiant=None, deposit=None):
     """Diffuse radiance of ``exitance``; with ``medium`` given, single scattering takes its share.
 
     The dipole's source already holds every order of scattering (with ``sigma_a = 0`` its total
@@ -98,7 +104,8 @@ def surface_radiance(exitance, cos_view, eta, *, medium=None, normals=None, view
     """
     if medium is None:
         return diffuse_radiance(exitance, cos_view, eta)
-    single_radiance, single_exitance = single_scattering(medium, normals, view_dirs, light_geometry, radiant)
+    single_radiance, single_exitance = single_scattering(medium, normals, view_dirs, light_geometry, radiant,
+                                                         deposit=deposit)
     return diffuse_radiance(jnp.maximum(exitance - single_exitance, 0.0), cos_view, eta) + single_radiance
 
 
