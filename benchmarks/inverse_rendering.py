@@ -126,6 +126,9 @@ def main(argv=None):
     parser.add_argument("--interface", default="index-matched", choices=["index-matched", "dielectric"],
                         help="index-matched: eta set to 1 on both sides (the path tracer's noise is low); "
                              "dielectric: the scene's eta, extrapolated from rough dielectrics (noisy)")
+    parser.add_argument("--rim-mm", type=float, default=10.0,
+                        help="leave out pixels this close to an open surface's rim: Mitsuba's plane is a box whose "
+                             "sides lose light, jsss's an open surface (default 10 mm, two of ketchup's red diffusion lengths)")
     parser.add_argument("--consistency", action="store_true",
                         help="also fit a jsss transport render (+1 %% noise) of the same size: the fit's own consistency")
     args = parser.parse_args(argv)
@@ -170,7 +173,7 @@ def main(argv=None):
                 # transport_truth.py agrees to 0.01-0.03 %), so the gain can also be held at 1.
                 for gain in (True, False):
                     kwargs = dict(sigma=sigma, profile_model=profile, specular=False, init=init, gain=gain,
-                                  block=block)
+                                  block=block, rim_mm=args.rim_mm)
                     result = fit_render(photo_scene, photo, **kwargs)  # compiles
                     t0 = time.perf_counter()
                     result = fit_render(photo_scene, photo, **kwargs)

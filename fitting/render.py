@@ -53,6 +53,7 @@ from jsss.render import plan_scene
 from jsss.render.planner import deposit_change
 from jsss.render.image_space import camera_buffers
 from jsss.render.lighting import lookup
+from jsss.render.mesh import distance_to_rim
 from jsss.render.pixel_methods import pixel_radiance, prepare_pixels
 from jsss.render.profiles import render_profile
 from jsss.render.renderer import (
@@ -146,14 +147,16 @@ class RenderFit:
 
 
 def fit_pixels(scene: Scene, photo, *, mask=None, saturation: float | None = None,
-               min_cos: float = 0.2) -> np.ndarray:
+               min_cos: float = 0.2, rim_mm: float = 0.0) -> np.ndarray:
     """The pixels a fit uses: the object as the scene's camera sees it, without its silhouette.
 
     A pixel counts when the object covers it and its 8 neighbours (a silhouette pixel is
     partly background, which no render of the object predicts), the surface faces the camera
     with a cosine of at least ``min_cos`` (grazing pixels are the most sensitive to the
-    mesh's facets), no channel reaches ``saturation`` (if given), and ``mask`` (optional,
-    (H, W), true = use) allows it.
+    mesh's facets), no channel reaches ``saturation`` (if given), it lies at least ``rim_mm``
+    from an open surface's rim (what lies beyond a rim is not in the scene: light that reaches
+    it leaves in the render, and meets whatever the real object goes on as in the photo), and
+    ``mask`` (optional, (H, W), true = use) allows it.
 
     Raises
     ------
@@ -172,6 +175,10 @@ def fit_pixels(scene: Scene, photo, *, mask=None, saturation: float | None = Non
     inside = ndimage.binary_erosion(buffers.coverage >= 1, structure=np.ones((3, 3), bool), border_value=1)
     facing = (buffers.normal * buffers.view).sum(-1) >= min_cos
     use = inside & facing
+    if not (rim_mm >= 0 and np.isfinite(rim_mm)):
+        raise RenderFitError(f"rim_mm must be a finite distance >= 0 [mm]; got {rim_mm!r}.")
+    if rim_mm > 0:
+        use &= distance_to_rim(scene.mesh, buffers.position) >= rim_mm
     if mask is not None:
         mask = np.asarray(mask)
         if mask.shape != use.shape:
@@ -360,7 +367,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
                method: str | None = None, accuracy: float = 0.001, samples: int | None = None, profile_model: str | None = None,
                g: float | None = None, init: Medium | None = None, gain: bool = True, specular: bool = True,
                max_steps: int = 200, replans: int = 3, unconstrained: float = 0.5, dtype=jnp.float64,
-               block: int = 1, progress=None) -> RenderFit:
+               block: int = 1, rim_mm: float = 0.0, progress=None) -> RenderFit:
     """Fit the scene's homogeneous material to ``photo``, a linear HDR image from the scene's camera.
 
     Parameters
@@ -374,7 +381,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     sigma : array broadcastable to photo, optional
         Each pixel's standard error. Default: ``noise`` times the pixel value, floored at
         ``noise`` times 1 % of the channel's 99th percentile (dark pixels).
-    mask, saturation
+    mask, saturation, rim_mm
         See :func:`fit_pixels`.
     method : str, optional
         Render method during the fit; default: the planner's choice for ``accuracy``.
@@ -416,7 +423,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     if not (noise > 0 and np.isfinite(noise)):
         raise RenderFitError(f"noise must be a positive relative error; got {noise!r}.")
     photo = np.asarray(photo, float)
-    use = fit_pixels(scene, photo, mask=mask, saturation=saturation)
+    use = fit_pixels(scene, photo, mask=mask, saturation=saturation, rim_mm=rim_mm)
     n_params = 7 if gain else 6
     if use.sum() * 3 < 10 * n_params:
         raise RenderFitError(f"photo: only {int(use.sum())} pixels of the object can be fitted (needs at least "
@@ -452,7 +459,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     mask = jnp.asarray(mask, dtype)
     notes, history, steps = [], [], 0
     say = progress if progress is not None else (lambda message: None)
-    def plan_for(theta):
+    def plan_for(theta, method=method):
         medium = _medium(theta, eta)
         fit_scene = dataclasses.replace(scene, material=dataclasses.replace(
             material, medium=medium, profile_model=profile_model, g=g))
@@ -467,6 +474,11 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
 
     say(f"round 1: planning the fit's renders (accuracy {100 * accuracy:g} %)")
     fit_scene, plan = plan_for(theta)
+    # Later rounds keep the start's method: an estimate that wandered to a short profile would
+    # otherwise switch to a method without spread (normal filtering), which cannot see the
+    # mean free path it is fitting, and the next round would lose it (measured on a marble
+    # photo with the gain free: mean free path +37000 %, unconstrained).
+    method_kept = plan.method
     for round_ in range(replans + 1):
         say(f"round {round_ + 1}: {plan.method}: the passes that stay fixed during the fit")
         render, data = _model_for(fit_scene, plan, dtype, profile_model, g)
@@ -491,7 +503,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         # worse than a biased estimate (marble from 3x off: chi^2/dof 1.18 at the truth,
         # 0.99 at a sigma_a 18 % low, so the fit stopped there).
         say(f"round {round_ + 1}: checking the plan against the estimate")
-        next_scene, next_plan = plan_for(theta)
+        next_scene, next_plan = plan_for(theta, method_kept)
         changed = [d.name for d, e in zip(plan.decisions, next_plan.decisions) if d.on != e.on]
         if next_plan.method != plan.method or next_plan.texture_size != plan.texture_size:
             changed.append("method or texture size")

@@ -62,6 +62,8 @@ def _parser():
     p.add_argument("--no-gain", action="store_true",
                    help="the photo is calibrated radiance: hold the exposure gain at 1")
     p.add_argument("--no-specular", action="store_true", help="the photo holds subsurface light only")
+    p.add_argument("--rim-mm", type=float, default=0.0,
+                   help="leave out pixels within this distance [mm] of an open surface's rim (default 0)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return p
@@ -169,7 +171,8 @@ def _run(args, say) -> int:
     t0 = time.perf_counter()
     result = fit_render(scene, photo, noise=args.noise, mask=mask, saturation=args.saturation, method=method,
                         accuracy=args.accuracy, profile_model=args.profile, g=args.g, gain=not args.no_gain,
-                        specular=not args.no_specular, progress=lambda line: say(f"{args.scene}: {line}"))
+                        specular=not args.no_specular, rim_mm=args.rim_mm,
+                        progress=lambda line: say(f"{args.scene}: {line}"))
     seconds = time.perf_counter() - t0
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)

@@ -94,6 +94,29 @@ def weld(mesh: Mesh, *, tolerance: float = 1e-9):
     return mesh.vertices[first], index, faces[keep]  # collapsed triangles (at poles) dropped
 
 
+def rim_segments(mesh: Mesh) -> np.ndarray:
+    """The open surface's boundary: (E, 2, 3) end points of the edges only one triangle uses
+    (empty for a closed surface)."""
+    vertices, _, faces = weld(mesh)
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    return np.asarray(vertices, float)[unique[counts == 1]]
+
+
+def distance_to_rim(mesh: Mesh, points) -> np.ndarray:
+    """Distance [mm] from each of ``points`` (..., 3) to the nearest rim edge (inf when closed)."""
+    points = np.asarray(points, float)
+    segments = rim_segments(mesh)
+    if len(segments) == 0:
+        return np.full(points.shape[:-1], np.inf)
+    flat = points.reshape(-1, 1, 3)
+    start, end = segments[None, :, 0], segments[None, :, 1]
+    along = end - start
+    t = np.clip(((flat - start) * along).sum(-1) / np.maximum((along**2).sum(-1), 1e-300), 0.0, 1.0)
+    distance = np.linalg.norm(flat - (start + t[..., None] * along), axis=-1).min(-1)
+    return distance.reshape(points.shape[:-1])
+
+
 def is_closed(mesh: Mesh) -> bool:
     """True when the welded surface has no boundary: every edge is shared by two triangles."""
     _, _, faces = weld(mesh)

@@ -152,3 +152,29 @@ def test_fit_command_writes_parameters_a_renderable_scene_and_a_figure(scene, tm
     bad = run(str(tmp_path / "small.exr"))
     assert bad.returncode == 2
     assert bad.stderr.strip().count("\n") == 0 and "32 x 24 pixels" in bad.stderr
+
+
+def test_rim_mm_leaves_out_the_pixels_near_an_open_surfaces_rim():
+    """A 40 mm plane: with rim_mm = 5 every fitted pixel's point is at least 5 mm inside the
+    square (closed form: 20 mm minus its larger |coordinate|), and some were left out; a
+    negative distance is a one-line error; a closed sphere has no rim to leave out."""
+    from jsss.render.image_space import camera_buffers
+
+    plane = parse_scene({"geometry": {"shape": "plane", "width": 40.0},
+                         "material": {"name": "ketchup"},
+                         "lights": [{"type": "point", "position": [5.0, -5.0, 30.0], "intensity": 1000.0}],
+                         "camera": {"position": [0.0, -50.0, 40.0], "look_at": [0.0, 0.0, 0.0], "fov": 50,
+                                    "resolution": [48, 36]}})
+    photo = np.ones((36, 48, 3))
+    everything, inner = fit_pixels(plane, photo), fit_pixels(plane, photo, rim_mm=5.0)
+    position = camera_buffers(plane.mesh, plane.camera).position
+    to_rim = 20.0 - np.abs(position[..., :2]).max(-1)
+    assert np.all(to_rim[inner] >= 5.0 - 1e-9)
+    assert (everything & (to_rim < 5.0)).sum() > 50 and inner.sum() < everything.sum()
+    with pytest.raises(RenderFitError, match="rim_mm"):
+        fit_pixels(plane, photo, rim_mm=-1.0)
+
+
+def test_a_sphere_has_no_rim(scene):
+    photo = np.ones((48, 64, 3))
+    assert np.array_equal(fit_pixels(scene, photo, rim_mm=50.0), fit_pixels(scene, photo))
