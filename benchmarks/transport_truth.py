@@ -262,10 +262,13 @@ def chandrasekhar_check(mi, *, albedo=0.18 / 0.241, spp=4096, chunks=2):
     return rows
 
 
-def _ours(scene, method, samples=128):
+def _ours(scene, method, samples=128, off=()):
     plan = plan_scene(scene, method=method, samples=samples if method == "image-space" else None)
     plan = plan.replace("specular", False, "subsurface only")
-    return render(scene, plan, dtype=jnp.float64).radiance, plan.on("single scattering")
+    for name in off:
+        plan = plan.replace(name, False, "benchmark: without it")
+    passes = ", ".join(name for name in ("single scattering", "oblique incidence", "deposit depth") if plan.on(name))
+    return render(scene, plan, dtype=jnp.float64).radiance, passes or "none"
 
 
 def main(argv=None):
@@ -279,6 +282,8 @@ def main(argv=None):
     parser.add_argument("--variant", default="auto", choices=["auto", "llvm_ad_rgb", "scalar_rgb"],
                         help="Mitsuba variant (auto: LLVM where it runs, else scalar)")
     parser.add_argument("--chunks", type=int, default=None, help="independent seeds (default 8; --quick 2)")
+    parser.add_argument("--index-matched", action="store_true",
+                        help="eta set to 1 on both sides: no rough-dielectric extrapolation, far less path-tracer noise")
     parser.add_argument("--chandrasekhar", action="store_true",
                         help="only check the path tracer against Chandrasekhar's exact plane reflection")
     args = parser.parse_args(argv)
@@ -295,27 +300,35 @@ def main(argv=None):
         return
     width, height, chunks = (40, 30, 2) if args.quick else (80, 60, 8)
     chunks = args.chunks or chunks
+    boundary = "index-matched (null boundary)" if args.index_matched else f"roughness {ROUGHNESS} -> 0 (in alpha^2)"
     print(f"transport truth: Mitsuba {mi.__version__} {mi.variant()} volpath, one grey medium per channel, {width}x{height}, "
-          f"{chunks} chunks x {args.spp} spp, roughness {ROUGHNESS} -> 0 (in alpha^2), {time.strftime('%Y-%m-%d')}")
+          f"{chunks} chunks x {args.spp} spp, {boundary}, {time.strftime('%Y-%m-%d')}")
     with tempfile.TemporaryDirectory() as folder:
         for name in args.scenes:
             scene = _with_resolution(load_scene(os.path.join(EXAMPLES, f"{name}.toml")), width, height)
+            if args.index_matched:
+                scene = index_matched(scene)
             ply = _mesh_file(scene, folder)
             t0 = time.perf_counter()
             lam, inner = lambert_check(mi, scene, ply, 4 * args.spp)
             print(f"\n## {name}: white Lambertian jsss / Mitsuba - 1 = "
                   + " / ".join(f"{100 * x:+.2f} %" for x in lam))
-            truth, chunk = subsurface_truth(mi, scene, ply, args.spp, chunks)
+            if args.index_matched:
+                truth, chunk = index_matched_truth(mi, scene, ply, args.spp, chunks, progress=False)
+            else:
+                truth, chunk = subsurface_truth(mi, scene, ply, args.spp, chunks)
             ratios = np.array([c[inner].sum(0) / truth[inner].sum(0) for c in chunk])
             noise = ratios.std(0, ddof=1) / np.sqrt(chunks)
             print(f"path tracer: {time.perf_counter() - t0:.0f} s; its own noise on the sums "
                   + " / ".join(f"{100 * x:.1f} %" for x in noise))
-            print("| method | profile | single scattering | ratio R | ratio G | ratio B | rel. RMS R | G | B |")
+            print("| method | profile | passes | ratio R | ratio G | ratio B | rel. RMS R | G | B |")
             print("|---|---|---|---:|---:|---:|---:|---:|---:|")
-            runs = [(method, profile) for profile in args.profiles for method in args.methods]
-            for method, profile in runs:
+            runs = [(method, profile, ()) for profile in args.profiles for method in args.methods]
+            # What the two passes for slanted and nearby light change, on the best configuration.
+            runs.append(("texture-space", "transport", ("oblique incidence", "deposit depth")))
+            for method, profile, off in runs:
                 material = dataclasses.replace(scene.material, profile_model=profile)
-                ours, single = _ours(dataclasses.replace(scene, material=material), method)
+                ours, passes = _ours(dataclasses.replace(scene, material=material), method, off=off)
                 ratio = ours[inner].sum(0) / truth[inner].sum(0)
                 # The path tracer's own per-pixel variance (from the chunks) is taken out of the
                 # mean square, so the RMS measures jsss's error, not Mitsuba's noise.
@@ -325,7 +338,7 @@ def main(argv=None):
                 power = (truth[inner] ** 2).mean(0) - noise_var
                 rms = [f"{100 * np.sqrt(m / p):.1f} %" if m > 0 and p > 0 else "below noise"
                        for m, p in zip(mse, power)]
-                print(f"| {method} | {profile} | {'on' if single else 'off'} | " + " | ".join(f"{r:.3f}" for r in ratio)
+                print(f"| {method} | {profile} | {passes} | " + " | ".join(f"{r:.3f}" for r in ratio)
                       + " | "
                       + " | ".join(rms) + " |")
 

@@ -43,3 +43,41 @@ def test_the_planner_turns_the_pass_on_where_slanted_light_returns_a_quarter_of_
     assert not plan_scene(marble, accuracy=0.2).on("oblique incidence")  # < 5 %
     skin = plan_scene(load_scene("examples/skin_backlit.toml"))
     assert not skin.on("oblique incidence")  # layered: no single albedo to take the law from
+
+
+@pytest.mark.parametrize("eta", [1.0, 1.4])
+def test_a_point_lights_irradiance_is_read_at_the_deposit_depth(eta):
+    """Lambert frames (no spread) of a plane 30 mm under a point light, looking at the lamp's
+    foot: the deposit-depth pass scales each pixel by d^2 / (d^2 + 2 delta d cos + delta^2),
+    delta = 1 / (2 sigma_t' eta), which under the lamp is the inverse square of a lamp
+    30 + delta mm up (closed form from the pixels' own positions)."""
+    from jsss.render.image_space import camera_buffers
+
+    sigma_a, sigma_s = np.array([0.06, 0.5, 1.0]), np.array([0.18, 0.3, 0.2])
+    data = {
+        "geometry": {"shape": "plane", "width": 80.0},
+        "material": {"sigma_a": sigma_a.tolist(), "sigma_s_prime": sigma_s.tolist(), "eta": eta, "specular": 0.0},
+        "lights": [{"type": "point", "position": [0.0, 0.0, 30.0], "intensity": 1000.0}],
+        "camera": {"position": [0.0, -20.0, 120.0], "look_at": [0.0, 0.0, 0.0], "fov": 20, "resolution": [12, 12]},
+        "render": {"texture_size": 64, "accuracy": 0.05},
+    }
+    scene = parse_scene(data)
+    plan = plan_scene(scene, method="lambert")
+    assert plan.on("deposit depth")
+    plan = plan.replace("single scattering", False, "test").replace("oblique incidence", False, "test")
+    off, on = (np.asarray(render(scene, plan.replace("deposit depth", flag, "test"), dtype=jnp.float64).radiance)
+               for flag in (False, True))
+    position = camera_buffers(scene.mesh, scene.camera).position
+    d = np.linalg.norm(np.array([0.0, 0.0, 30.0]) - position, axis=-1)[..., None]
+    cos = (30.0 / d)
+    delta = 1 / (2 * (sigma_a + sigma_s) * eta)
+    expected = d**2 / (d**2 + 2 * delta * d * cos + delta**2)
+    np.testing.assert_allclose(on[5:7, 5:7] / off[5:7, 5:7], expected[5:7, 5:7], rtol=1e-9)
+    centre = (30.0 / (30.0 + delta)) ** 2
+    assert np.all(np.abs(on[5:7, 5:7] / off[5:7, 5:7] / centre - 1) < 0.02)
+
+
+def test_parallel_light_is_not_read_deeper():
+    scene = _slanted_plane(1.0)
+    plan = plan_scene(scene, method="lambert")
+    assert not plan.on("deposit depth") and "no point light" in plan.describe()
