@@ -95,7 +95,8 @@ class RenderFit:
         chi^2 per degree of freedom of the whitened residuals (about 1 when model and noise fit).
     steps : int; converged : bool
         Solver steps (all outer rounds); the solver met its tolerances, every parameter is
-        finite and has a finite standard error (the image constrains it).
+        finite and has a finite standard error (the image constrains it), and no channel ran
+        to the edge of the parameters (an albedo' above 0.9999 from a start below it).
     n_pixels : int
         Pixels used (the mask).
     method, profile_model : str
@@ -546,15 +547,24 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         notes.append("not constrained by the image (relative standard error): " + ", ".join(loose)
                      + "; their values are the solver's, not the photo's (a uniformly lit object hides the mean "
                        "free path; Lambert has no spread at all)")
+    albedo = sigma_s / (sigma_a + sigma_s)
+    start_albedo = np.asarray(scattering) / np.asarray(absorption + scattering)
+    edge = [c for c, a, a0 in zip("RGB", albedo, start_albedo) if a > 0.9999 and a0 <= 0.9999]
+    if edge:
+        notes.append("ran to the edge of the parameters: no absorption left in " + "/".join(edge)
+                     + (" (with the gain fitted, brightness is gain x R_d and the fit traded one for the other; "
+                        "hold the gain for a calibrated camera: gain=False, --no-gain)" if gain else ""))
     if chi2 > 4:
         notes.append(f"poor fit: chi2/dof {chi2:.1f} (expected about 1); the errors are widened by its square root. "
                      "Likely a wrong eta, geometry or light, a noise level set too low, or the profile model's bias")
     final = Medium(jnp.asarray(sigma_a), jnp.asarray(sigma_s), material.eta)
     image = np.asarray(render(_medium(theta, eta), data))
     gain_value = float(np.exp(theta_np[6])) if gain else 1.0
+    ran_away = bool(edge)
     return RenderFit(final, sigma_a * rel[:3], sigma_s * rel[3:6], gain_value,
                      gain_value * float(rel[6]) if gain else 0.0, artist[:3], artist_err[:3], artist[3:],
                      artist_err[3:], covariance, tuple(names), chi2, steps,
-                     bool(solved) and bool(np.all(np.isfinite(theta_np))) and bool(np.all(np.isfinite(rel))),
+                     bool(solved) and not ran_away and bool(np.all(np.isfinite(theta_np)))
+                     and bool(np.all(np.isfinite(rel))),
                      int(use.sum()), plan.method, profile_model,
                      image * gain_value, use, tuple(notes), tuple(history))
