@@ -25,10 +25,11 @@ returning light more diffuse, so the ratio is then an upper bound on the growth
 exact at eta 1, 1.6-2.8 points high at 66 degrees behind eta 1.3 and 1.5).
 
 The renderer takes only the total from here. The *angle* at which the multiply scattered light
-leaves still follows the exit lobe of :mod:`jsss.render.shading`, and the whole reflection of an
-index-matched half space, :func:`index_matched_brdf`, is brighter than that at slanted light
-and view (12-16 % for albedo 0.75 at 45-60 degrees); Mitsuba's frames of such a plane agree
-with :func:`index_matched_brdf` to 0.05 %.
+leaves still follows the exit lobe of :mod:`jsss.render.shading`, not the
+:math:`H(\mu)H(\mu_0)` shape of the whole reflection of an index-matched half space
+(:func:`index_matched_brdf`): with the transport profile and this law, Lambert frames of such a
+plane (albedo 0.747) are -0.8 to +5.6 % off it at four view and light angles, where Mitsuba's
+frames agree with it to 0.07 % (``benchmarks/transport_truth.py --chandrasekhar``).
 """
 
 from __future__ import annotations
