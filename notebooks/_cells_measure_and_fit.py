@@ -33,8 +33,9 @@ reference = read_exr(paths["reference"]).pixels
 dark = read_exr(paths["dark"]).pixels
 fig, axes = plt.subplots(1, 2, figsize=(8, 4))
 for ax, image, title in zip(axes, (measurement, reference), ("marble", "white reference")):
-    ax.imshow(np.log10(np.clip(image[..., 1] - dark[..., 1], 1e-6, None)), cmap="magma")
-    ax.set_title(title + " (log10, green)"); ax.axis("off")
+    shown = ax.imshow(np.log10(np.clip(image[..., 1] - dark[..., 1], 1e-6, None)), cmap="magma")
+    ax.set_title(title + " (green)"); ax.axis("off")
+    fig.colorbar(shown, ax=ax, shrink=0.8, label="log10 pixel value, dark frame subtracted")
 """),
     ("md", """
 ## Calibrate, bin, fit

@@ -55,10 +55,15 @@ for i, (name, (reference, frames)) in enumerate(results.items()):
         f = next(f for f in frames if (f.row.method, f.row.knob) == key)
         axes[2 * i, j].imshow(tone_map(f.radiance, exposure=exposure)[0])
         axes[2 * i, j].set_title(f"{key[0]} {key[1]}: {100 * f.row.error:.1f} %", fontsize=8)
-        axes[2 * i + 1, j].imshow(np.abs(f.radiance - reference.radiance).max(-1) / scale, cmap="magma", vmin=0, vmax=0.2)
+        error_map = axes[2 * i + 1, j].imshow(np.abs(f.radiance - reference.radiance).max(-1) / scale, cmap="magma",
+                                              vmin=0, vmax=0.2)
+    axes[2 * i + 1, 0].text(0.5, 0.5, "error maps:\\n|method - reference|", ha="center", va="center", fontsize=8,
+                            transform=axes[2 * i + 1, 0].transAxes)
 for ax in axes.ravel():
     ax.axis("off")
 plt.tight_layout()
+fig.colorbar(error_map, ax=axes[1::2, 1:].ravel().tolist(), shrink=0.8,
+             label="|error| / brightest reference pixel (clipped at 0.2)")
 """),
     ("md", """
 What the error maps show: on the sphere Lambert misses the soft terminator, image-space

@@ -128,7 +128,7 @@ class LightGeometry(NamedTuple):
     front_uv: np.ndarray
     behind: np.ndarray
     to_light: np.ndarray
-    distance: np.ndarray
+    distance: np.ndarray | float = np.inf  # a geometry built without it reads as parallel light
 
     def astype(self, dtype) -> "LightGeometry":
         """The same geometry as ``jnp`` arrays of ``dtype`` (what the JAX passes read)."""
