@@ -24,7 +24,26 @@ size = (96, 72) if FAST else (320, 240)
 texture = 128 if FAST else 512
 examples = os.path.join(os.path.dirname(os.path.abspath("render.ipynb")), "..", "examples")
 """),
-    ("md", "## The example scenes and their plans"),
+    ("md", """
+## The example scenes and their plans
+
+What a frame is made of, pass by pass (each plan below says which it runs and why):
+
+* **irradiance**: the light each texel receives, after the Fresnel loss at entry, with shadow
+  maps for visibility. Two corrections to the profiles' beam along the normal:
+  *oblique incidence* (light arriving at a slant is deposited shallower and more of it
+  returns: Chandrasekhar's H function) and *deposit depth* (a nearby point light's rays keep
+  spreading below the surface, so it is read half a reduced mean free path deep);
+* **diffusion**: the irradiance texture blurred by each Gaussian of the profile; the profile's
+  light at a point is the weighted sum (the blurs use true surface distances through the
+  texture's stretch where it varies);
+* **translucent shadow maps**: light that crosses a thin part from a lit face to a shadowed
+  one (the skin's silhouette);
+* **single scattering**: the first bounce with its own angular law, which replaces its share of
+  the diffusion light (low-albedo materials such as ketchup);
+* **camera**: exitance spread over outgoing directions by the exit Fresnel lobe, looked up per
+  pixel, plus a microfacet specular lobe.
+"""),
     ("code", """
 images = {}
 for name in ("marble_sphere", "skin_backlit", "ketchup_plane"):
