@@ -131,7 +131,8 @@ def main(argv=None):
                              "sides lose light, jsss's an open surface); default 0: on ketchup, 3-6 mm made chi2/dof "
                              "smaller and every estimate worse")
     parser.add_argument("--consistency", action="store_true",
-                        help="also fit a jsss transport render (+1 %% noise) of the same size: the fit's own consistency")
+                        help="also fit a jsss transport render (+1 %% noise) of the same size: "
+                             "the fit's own consistency")
     args = parser.parse_args(argv)
     width, height = (80, 60) if args.quick else args.size
     spp, chunks = (64, 2) if args.quick else (args.spp, args.chunks)

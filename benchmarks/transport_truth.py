@@ -256,7 +256,8 @@ def chandrasekhar_check(mi, *, albedo=0.18 / 0.241, spp=4096, chunks=2):
         for oblique in (False, True):
             plan = plan_scene(scene, method="lambert", accuracy=0.01).replace("specular", False, "subsurface only")
             plan = plan.replace("single scattering", True, "check").replace("oblique incidence", oblique, "check")
-            ours.append(float(np.asarray(render(scene, plan, dtype=jnp.float64).radiance)[..., 0].mean()) / np.cos(light))
+            frame = np.asarray(render(scene, plan, dtype=jnp.float64).radiance)
+            ours.append(float(frame[..., 0].mean()) / np.cos(light))
         rows.append((view_deg, light_deg, float(np.mean(means)), exact, float(np.std(means, ddof=1) / np.sqrt(chunks)),
                      *ours))
     return rows
@@ -283,7 +284,8 @@ def main(argv=None):
                         help="Mitsuba variant (auto: LLVM where it runs, else scalar)")
     parser.add_argument("--chunks", type=int, default=None, help="independent seeds (default 8; --quick 2)")
     parser.add_argument("--index-matched", action="store_true",
-                        help="eta set to 1 on both sides: no rough-dielectric extrapolation, far less path-tracer noise")
+                        help="eta set to 1 on both sides: no rough-dielectric extrapolation, "
+                             "far less path-tracer noise")
     parser.add_argument("--chandrasekhar", action="store_true",
                         help="only check the path tracer against Chandrasekhar's exact plane reflection")
     args = parser.parse_args(argv)
@@ -295,7 +297,8 @@ def main(argv=None):
               "jsss / closed form - 1 (oblique pass off / on) |")
         print("|---:|---:|---:|---:|---:|---:|")
         for view, light, theirs, exact, noise, off, on in chandrasekhar_check(mi):
-            print(f"| {view:g} | {light:g} | {theirs:.5f} +- {noise:.5f} | {exact:.5f} | {100 * (theirs / exact - 1):+.2f} % | "
+            print(f"| {view:g} | {light:g} | {theirs:.5f} +- {noise:.5f} | {exact:.5f} | "
+                  f"{100 * (theirs / exact - 1):+.2f} % | "
                   f"{100 * (off / exact - 1):+.1f} % / {100 * (on / exact - 1):+.1f} % |")
         return
     width, height, chunks = (40, 30, 2) if args.quick else (80, 60, 8)

@@ -17,8 +17,8 @@ in the medium), a weighted sum of those images and the per-pixel shading (single
 included). The variances are planned for the starting material; if the fitted profile is not
 represented on them to the plan's accuracy, they are re-planned and the fit is repeated from
 there (at most ``replans`` times); so are the oblique-incidence law that scales the irradiance
-and the depth at which point lights are read (:mod:`jsss.incidence`), which depend on the medium (its change within the last round is not in
-the Jacobian). The pixel methods (Lambert, normal filtering, image-space)
+and the depth at which point lights are read (:mod:`jsss.incidence`), which depend on the
+medium (their change within the last round is not in the Jacobian). The pixel methods (Lambert, normal filtering, image-space)
 are differentiated through their whole frame.
 
 What the image constrains is reported, not assumed: the covariance
