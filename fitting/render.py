@@ -18,8 +18,8 @@ included). The variances are planned for the starting material; if the fitted pr
 represented on them to the plan's accuracy, they are re-planned and the fit is repeated from
 there (at most ``replans`` times); so are the oblique-incidence law that scales the irradiance
 and the depth at which point lights are read (:mod:`jsss.incidence`), which depend on the
-medium (their change within the last round is not in the Jacobian). The pixel methods (Lambert, normal filtering, image-space)
-are differentiated through their whole frame.
+medium (their change within the last round is not in the Jacobian). The pixel methods
+(Lambert, normal filtering, image-space) are differentiated through their whole frame.
 
 What the image constrains is reported, not assumed: the covariance
 :math:`s^2 (J^T J)^{-1}` at the solution, with :math:`s^2 = \max(1, \chi^2/(m - n))` so that a
