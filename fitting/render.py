@@ -285,6 +285,9 @@ def _texture_render(profile_model: str, g: float):
     return lambda medium, data: _texture_radiance(medium, data, profile_model, g)
 
 
+LAW_REPLAN = 0.01  # re-plan when the oblique-incidence law or the deposit depth moves a pixel by more
+
+
 def _incidence_moved(before: Scene, after: Scene) -> float:
     """Largest relative change of the oblique-incidence law between two scenes' media."""
     cosines = jnp.linspace(0.05, 1.0, 20)
@@ -513,11 +516,13 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
                 changed.append("number of Gaussians")
             elif (moved := np.max(np.abs(np.log(next_plan.variances / plan.variances)))) > 0.1:
                 changed.append(f"Gaussian variances (moved by up to {100 * moved:.0f} %)")
-            if plan.on("oblique incidence") and (moved := _incidence_moved(fit_scene, next_scene)) > accuracy:
-                # The texture-space basis holds the irradiance scaled by the round's own law.
+            # The fixed passes hold the irradiance scaled by the round's own laws; a move below
+            # LAW_REPLAN changes every pixel by less than that, and another round of blurs for it
+            # made the test suite's fits 1.5-3x slower.
+            if plan.on("oblique incidence") and (moved := _incidence_moved(fit_scene, next_scene)) > LAW_REPLAN:
                 changed.append(f"oblique-incidence law (moved by up to {100 * moved:.2f} %)")
             if plan.on("deposit depth") and (moved := abs(deposit_change(next_scene)[0]
-                                                          - deposit_change(fit_scene)[0])) > accuracy:
+                                                          - deposit_change(fit_scene)[0])) > LAW_REPLAN:
                 changed.append(f"deposit depth (irradiance under the lamp moved by {100 * moved:.2f} %)")
         if not changed:
             break
