@@ -536,8 +536,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     if not (np.isfinite(r).all() and np.isfinite(J).all()):
         # A NaN from the renderer would otherwise surface as "eigenvalues did not converge".
         raise RenderFitError(f"{scene.source}: the fit's render or its derivative is not finite at sigma_a = "
-                             f"{np.exp(np.asarray(theta[:3])).tolist()}, sigma_s' = {np.exp(np.asarray(theta[3:6])).tolist()} "
-                             f"({plan.method}, {profile_model}); this is a bug in jsss: please report it with the scene.")
+                             f"{np.exp(np.asarray(theta[:3])).tolist()}, "
+                             f"sigma_s' = {np.exp(np.asarray(theta[3:6])).tolist()} ({plan.method}, {profile_model}); "
+                             "this is a bug in jsss: please report it with the scene.")
     covariance, null = _covariance(J, max(1.0, chi2))
     theta_np = np.asarray(theta)
     rel = _standard_errors(np.eye(len(theta_np)), covariance, null)  # errors of logarithms = relative errors
@@ -565,11 +566,10 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     final = Medium(jnp.asarray(sigma_a), jnp.asarray(sigma_s), material.eta)
     image = np.asarray(render(_medium(theta, eta), data))
     gain_value = float(np.exp(theta_np[6])) if gain else 1.0
-    ran_away = bool(edge)
     return RenderFit(final, sigma_a * rel[:3], sigma_s * rel[3:6], gain_value,
                      gain_value * float(rel[6]) if gain else 0.0, artist[:3], artist_err[:3], artist[3:],
                      artist_err[3:], covariance, tuple(names), chi2, steps,
-                     bool(solved) and not ran_away and bool(np.all(np.isfinite(theta_np)))
+                     bool(solved) and not edge and bool(np.all(np.isfinite(theta_np)))
                      and bool(np.all(np.isfinite(rel))),
                      int(use.sum()), plan.method, profile_model,
                      image * gain_value, use, tuple(notes), tuple(history))

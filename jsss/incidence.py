@@ -41,7 +41,7 @@ import numpy as np
 from .medium import Medium
 from .numerics import as_float_array, safe_sqrt
 
-__all__ = ["deposit_depth", "h_function", "incidence_ratio", "index_matched_brdf", "plane_albedo"]
+__all__ = ["deposit_depth", "h_function", "incidence_law", "incidence_ratio", "index_matched_brdf", "plane_albedo"]
 
 NODES = 48          # Gauss-Legendre nodes on [0, 1]
 ITERATIONS = 400    # the 1/H form converges geometrically; at albedo 1 it is slowest (1e-9 by 300)
@@ -110,6 +110,32 @@ def index_matched_brdf(albedo, cos_incident, cos_exit):
     return albedo * H[0] * H[1] / (4 * jnp.pi * path)
 
 
+def incidence_law(medium: Medium):
+    r"""The oblique-incidence law of ``medium`` as a function of the outside cosine: see
+    :func:`incidence_ratio`, which it evaluates. The H solve (per channel) is done here, once;
+    the returned function only refracts and interpolates, so a renderer calls this once per
+    frame and the result once per light.
+    """
+    eta = medium.eta
+    albedo = medium.sigma_s_prime / (medium.sigma_a + medium.sigma_s_prime)
+    n = len(jnp.shape(albedo))
+    # A frame has ~10^5 points: A is evaluated on 257 cosines and interpolated linearly (within
+    # 1e-6 of it: A is smooth in mu). The grid ends at 1, so its last row is normal incidence.
+    grid = jnp.linspace(0.0, 1.0, 257, dtype=albedo.dtype)
+    table = plane_albedo(albedo, grid).reshape(257, -1)                      # (257, channels)
+    table = table / table[-1]
+
+    def ratio(cos_incident):
+        cos = jnp.clip(as_float_array(cos_incident), 0.0, 1.0)
+        cos_b = cos.reshape(cos.shape + (1,) * n)
+        inside = safe_sqrt(jnp.maximum(1 - (1 - cos_b**2) / jnp.square(eta), 0.0))   # S + C, Snell
+        flat = jnp.broadcast_to(inside, cos.shape + jnp.shape(albedo)).reshape(cos.shape + (-1,))
+        value = jnp.stack([jnp.interp(flat[..., c], grid, table[:, c]) for c in range(table.shape[1])], -1)
+        return value.reshape(cos.shape + jnp.shape(albedo))
+
+    return ratio
+
+
 def incidence_ratio(medium: Medium, cos_incident):
     r"""Total reflectance at incidence ``cos_incident`` (outside) over that at normal incidence,
     per channel: the factor by which oblique light returns more than the profiles' normal beam.
@@ -118,21 +144,9 @@ def incidence_ratio(medium: Medium, cos_incident):
     result has shape ``S + C`` and is 1 at normal incidence. Uses the similarity albedo
     :math:`\sigma_s'/(\sigma_a + \sigma_s')`. Exact for isotropic scattering behind an
     index-matched boundary; behind a Fresnel boundary an upper bound (see the module notes).
+    For many evaluations with one medium, :func:`incidence_law` solves once.
     """
-    cos = jnp.clip(as_float_array(cos_incident), 0.0, 1.0)
-    eta = medium.eta
-    albedo = medium.sigma_s_prime / (medium.sigma_a + medium.sigma_s_prime)
-    n = len(jnp.shape(albedo))
-    cos_b = cos.reshape(cos.shape + (1,) * n)
-    inside = safe_sqrt(jnp.maximum(1 - (1 - cos_b**2) / jnp.square(eta), 0.0))   # S + C, Snell
-    # The H solve is per channel, and a frame has ~10^5 points: A is evaluated on 257
-    # cosines once and interpolated linearly (within 1e-6 of it: A is smooth in mu).
-    grid = jnp.linspace(0.0, 1.0, 257, dtype=albedo.dtype)
-    table = plane_albedo(albedo, grid).reshape(257, -1)                      # (257, channels)
-    normal = plane_albedo(albedo, jnp.ones((), albedo.dtype)).reshape(-1)    # (channels,)
-    flat = jnp.broadcast_to(inside, cos.shape + jnp.shape(albedo)).reshape(cos.shape + (-1,))
-    value = jnp.stack([jnp.interp(flat[..., c], grid, table[:, c]) / normal[c] for c in range(table.shape[1])], -1)
-    return value.reshape(cos.shape + jnp.shape(albedo))
+    return incidence_law(medium)(cos_incident)
 
 
 def deposit_depth(medium: Medium):

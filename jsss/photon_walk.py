@@ -301,8 +301,9 @@ def run_walk(params, *, n_photons: int, lanes: int = 4096, max_steps: int = 2000
 
     ``params`` = (sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below), per layer
     arrays of one dtype (see :mod:`jsss.montecarlo`), optionally followed by the cosine at which
-    photons start inside (an oblique beam after refraction; default 1, along the normal). A photon still inside after
-    ``max_steps`` events or ``max_path`` [mm] of path is recorded as lost (side 0). Progress
+    photons start inside (an oblique beam after refraction; default 1, along the normal). A
+    photon still inside after ``max_steps`` events or ``max_path`` [mm] of path is recorded as
+    lost (side 0). Progress
     is printed to stderr when ``progress`` (default: runs of more than 64 photons per lane).
     """
     dtype = params[0].dtype

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..fresnel import fresnel_transmittance
-from ..incidence import deposit_depth, incidence_ratio
+from ..incidence import deposit_depth, incidence_law
 from .mesh import Mesh
 from .raster import OrthographicView, PerspectiveView, rasterize, surface_attributes
 
@@ -215,11 +215,12 @@ def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None, deposi
         Relative index of refraction of the material.
     """
     total = 0.0
+    law = incidence_law(medium) if medium is not None else None  # one H solve for every light
     for i, g in enumerate(lights):
         cos = jnp.clip(jnp.asarray(g.cosine, radiant.dtype), 0.0, 1.0)
         transmitted = fresnel_transmittance(cos[..., None], eta)
-        if medium is not None:
-            transmitted = transmitted * incidence_ratio(medium, cos)
+        if law is not None:
+            transmitted = transmitted * law(cos)
         if deposit is not None:
             transmitted = transmitted * depth_falloff(g, deposit_depth(deposit), radiant.dtype)
         weight = (cos * jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None]

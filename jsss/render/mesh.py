@@ -94,13 +94,28 @@ def weld(mesh: Mesh, *, tolerance: float = 1e-9):
     return mesh.vertices[first], index, faces[keep]  # collapsed triangles (at poles) dropped
 
 
-def rim_segments(mesh: Mesh) -> np.ndarray:
-    """The open surface's boundary: (E, 2, 3) end points of the edges only one triangle uses
-    (empty for a closed surface)."""
+def _edge_counts(mesh: Mesh):
+    """The welded surface's vertices, its edges (E, 2) and how many triangles use each."""
     vertices, _, faces = weld(mesh)
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     unique, counts = np.unique(edges, axis=0, return_counts=True)
-    return np.asarray(vertices, float)[unique[counts == 1]]
+    return vertices, unique, counts
+
+
+def rim_segments(mesh: Mesh) -> np.ndarray:
+    """The open surface's boundary: (E, 2, 3) end points of the edges only one triangle uses
+    (empty for a closed surface)."""
+    vertices, edges, counts = _edge_counts(mesh)
+    return np.asarray(vertices, float)[edges[counts == 1]]
+
+
+def _distance_to_segments(points, start, end) -> np.ndarray:
+    """Distance from each of ``points`` (P, 3) to the nearest of the segments ``start``-``end``
+    (each (E, 3)): shape (P,)."""
+    flat = np.asarray(points, float).reshape(-1, 1, 3)
+    along = end - start
+    t = np.clip(((flat - start) * along).sum(-1) / np.maximum((along**2).sum(-1), 1e-300), 0.0, 1.0)
+    return np.linalg.norm(flat - (start + t[..., None] * along), axis=-1).min(-1)
 
 
 def distance_to_rim(mesh: Mesh, points) -> np.ndarray:
@@ -109,19 +124,31 @@ def distance_to_rim(mesh: Mesh, points) -> np.ndarray:
     segments = rim_segments(mesh)
     if len(segments) == 0:
         return np.full(points.shape[:-1], np.inf)
-    flat = points.reshape(-1, 1, 3)
-    start, end = segments[None, :, 0], segments[None, :, 1]
-    along = end - start
-    t = np.clip(((flat - start) * along).sum(-1) / np.maximum((along**2).sum(-1), 1e-300), 0.0, 1.0)
-    distance = np.linalg.norm(flat - (start + t[..., None] * along), axis=-1).min(-1)
-    return distance.reshape(points.shape[:-1])
+    return _distance_to_segments(points, segments[:, 0], segments[:, 1]).reshape(points.shape[:-1])
+
+
+def distance_to_surface(mesh: Mesh, point) -> float:
+    """Shortest distance [mm] from ``point`` to the mesh's triangles (inside, edges or corners)."""
+    p = np.asarray(point, float)
+    a, b, c = (np.asarray(mesh.vertices, float)[np.asarray(mesh.faces)[:, i]] for i in range(3))
+    normal = np.cross(b - a, c - a)
+    area2 = np.maximum((normal**2).sum(-1), 1e-300)
+    # Barycentric coordinates of p's projection onto each triangle's plane.
+    to_p = p - a
+    u = (np.cross(to_p, c - a) * normal).sum(-1) / area2
+    v = (np.cross(b - a, to_p) * normal).sum(-1) / area2
+    inside = (u >= 0) & (v >= 0) & (u + v <= 1)
+    if inside.any():  # the nearest projection that lands in its own triangle
+        plane = float(np.min(np.abs((to_p * normal).sum(-1))[inside] / np.sqrt(area2[inside])))
+    else:
+        plane = np.inf
+    edges = _distance_to_segments(p[None], np.concatenate([a, b, c]), np.concatenate([b, c, a]))[0]
+    return min(plane, float(edges))
 
 
 def is_closed(mesh: Mesh) -> bool:
     """True when the welded surface has no boundary: every edge is shared by two triangles."""
-    _, _, faces = weld(mesh)
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(edges, axis=0, return_counts=True)
+    _, _, counts = _edge_counts(mesh)
     return bool(np.all(counts == 2))
 
 

@@ -112,8 +112,8 @@ def pixel_exitance(method: str, profile: SampledProfile, radiant, eta, prep: Pix
     dtype = radiant.dtype
     albedo = profile.albedo().astype(dtype)
     if method == "normal filtering":
-        channels = [irradiance([g.astype(dtype) for g in lights], radiant, eta, medium=oblique, deposit=deposit)[..., c]
-                    for c, lights in enumerate(prep.channel_lights)]
+        channels = [irradiance([g.astype(dtype) for g in lights], radiant, eta, medium=oblique,
+                               deposit=deposit)[..., c] for c, lights in enumerate(prep.channel_lights)]
         return albedo * jnp.stack(channels, -1)
     E = irradiance([g.astype(dtype) for g in prep.lights], radiant, eta, medium=oblique, deposit=deposit)
     if method == "lambert":

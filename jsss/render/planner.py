@@ -57,7 +57,7 @@ from ..single_scattering import single_scattering_albedo
 from .calibration import (METHODS, FrameFeatures, choose_method, estimate_methods, knob_label, load_calibration,
                           parse_knob)
 from .lighting import light_geometry, shadow_map
-from .mesh import is_closed
+from .mesh import distance_to_surface, is_closed
 from .profiles import choose_variances, full_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
@@ -374,27 +374,6 @@ def oblique_incidence_decision(material, target):
                 "normal incidence, so the irradiance is scaled by Chandrasekhar's law")
 
 
-def _distance_to_mesh(mesh, point) -> float:
-    """Shortest distance [mm] from ``point`` to the mesh's triangles (inside, edges or corners)."""
-    p = np.asarray(point, float)
-    a, b, c = (np.asarray(mesh.vertices, float)[np.asarray(mesh.faces)[:, i]] for i in range(3))
-    normal = np.cross(b - a, c - a)
-    area2 = np.maximum((normal**2).sum(-1), 1e-300)
-    # Barycentric coordinates of p's projection onto each triangle's plane.
-    to_p = p - a
-    u = (np.cross(to_p, c - a) * normal).sum(-1) / area2
-    v = (np.cross(b - a, to_p) * normal).sum(-1) / area2
-    inside = (u >= 0) & (v >= 0) & (u + v <= 1)
-    plane = np.abs((to_p * normal).sum(-1)) / np.sqrt(area2)
-
-    def to_segment(s, e):
-        t = np.clip(((p - s) * (e - s)).sum(-1) / np.maximum(((e - s) ** 2).sum(-1), 1e-300), 0.0, 1.0)
-        return np.linalg.norm(p - (s + t[:, None] * (e - s)), axis=-1)
-
-    edges = np.minimum(np.minimum(to_segment(a, b), to_segment(b, c)), to_segment(c, a))
-    return float(np.min(np.where(inside, plane, edges)))
-
-
 def deposit_change(scene):
     """(change, nearest, depth): how much less irradiance reaches the deposit depth ``depth``
     [mm, deepest channel] than the surface, under the nearest point light (``nearest`` mm from
@@ -404,7 +383,7 @@ def deposit_change(scene):
     if material.medium is None or not points:
         return 0.0, np.inf, 0.0
     depth = float(np.max(np.asarray(deposit_depth(material.medium), float)))
-    nearest = min(_distance_to_mesh(scene.mesh, light.position) for light in points)
+    nearest = min(distance_to_surface(scene.mesh, light.position) for light in points)
     return 1 - (nearest / (nearest + depth)) ** 2, nearest, depth
 
 
