@@ -18,6 +18,7 @@ from jsss.gaussians import (
     geometric_series,
     layers_as_gaussians,
     pole_weight_curves,
+    poly_add,
     poly_multiply,
     poly_total,
     reduce_to,
@@ -96,6 +97,25 @@ def test_geometric_series_stops_within_its_energy_tolerance():
     k = np.geomspace(1e-2, 20, 30)
     np.testing.assert_allclose(spectrum(to_gaussian_sum(series), k), 1 / (1 - spectrum(to_gaussian_sum(a), k)),
                                atol=2e-6)
+
+
+@pytest.mark.parametrize("max_terms", [1, 2, 5, 7, 11, 20])  # M + 1 = 6, 12, 21 read differently backwards
+def test_geometric_series_by_doubling_equals_the_term_by_term_sum(max_terms):
+    """The series is built by doubling; the sum 1 + a + ... + a^M one product at a time,
+    with products that fold into the top degree (support 30 of degree 40), is the truth.
+    Eager (M from the tolerance, capped by max_terms) and under jit (M = max_terms)."""
+    from jsss.poly_gaussians import PolyGaussian
+
+    a = random_poly(3, 40, 0.95, support=30)
+    power = PolyGaussian(jnp.zeros_like(a.coefficients).at[0].set(1.0), a.base_variance)
+    expected = power
+    for _ in range(max_terms):
+        power = poly_multiply(power, a)
+        expected = poly_add(expected, power)
+    eager = geometric_series(a, tol=1e-12, max_terms=max_terms)
+    traced = jax.jit(lambda p: geometric_series(p, max_terms=max_terms))(a)
+    for got in (eager, traced):
+        np.testing.assert_allclose(got.coefficients, expected.coefficients, rtol=1e-12, atol=1e-14)
 
 
 def test_kubelka_munk_in_the_polynomial_basis_equals_frequency_space():
