@@ -77,7 +77,9 @@ print("gain", round(fit.gain, 4), "+-", round(fit.gain_err, 4))
 print("R_d", np.round(fit.reflectance, 4), "mean free path [mm]", np.round(fit.mean_free_path, 4))
 """),
     ("code", """
-residual = np.where(fit.mask, (fit.image - photo).mean(-1) / (0.01 * photo.mean(-1)), np.nan)
+noise = 0.01 * photo.mean(-1)
+residual = np.full(noise.shape, np.nan)  # pixels the fit used only: the background has no noise to divide by
+residual[fit.mask] = (fit.image - photo).mean(-1)[fit.mask] / noise[fit.mask]
 fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), constrained_layout=True)
 shown, exposure = tone_map(photo)
 axes[0].imshow(shown); axes[0].set_title("photo")
