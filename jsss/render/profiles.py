@@ -12,6 +12,8 @@ profile (:func:`choose_variances`), not assumed.
 
 from __future__ import annotations
 
+import collections
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -19,6 +21,7 @@ import numpy as np
 from .. import dipole, transport
 from .. import layers as _layers
 from ..gaussians import GaussianSum, empirical_dipole_fit, evaluate, layers_as_gaussians, to_gaussian_sum
+from ..numerics import is_concrete
 from .scene import Material
 
 __all__ = ["choose_variances", "exact_profile", "full_profile", "reduction_error", "render_profile", "shared_variances"]
@@ -32,10 +35,37 @@ def full_profile(material: Material, medium=None) -> GaussianSum:
     if material.gaussians is not None:
         return material.gaussians
     if material.layers:
-        R, _ = layers_as_gaussians(list(material.layers), material.base)
-        return to_gaussian_sum(R)
+        return _layered_profile(material)
     gs = empirical_dipole_fit(material.medium if medium is None else medium)
     return GaussianSum(gs.weights.reshape(gs.weights.shape[0], -1), gs.variances)
+
+
+_LAYERED_KEPT = 8  # stacks remembered by _layered_profile
+_layered_profiles: collections.OrderedDict = collections.OrderedDict()
+
+
+def _layered_profile(material: Material) -> GaussianSum:
+    """The stack's Kubelka-Munk profile, remembered by the stack's numbers.
+
+    Planning asks for it three times (the frame's features, the variances, the render's
+    weights), and each is 2-3 s of multipole fits and polynomial products on a CPU; the
+    stack does not change between them. Traced stacks (under jit or grad) are never kept.
+    """
+    stack = (tuple(material.layers), material.base)
+    if not is_concrete(stack):
+        R, _ = layers_as_gaussians(list(material.layers), material.base)
+        return to_gaussian_sum(R)
+    leaves, treedef = jax.tree_util.tree_flatten(stack)
+    arrays = [np.asarray(leaf) for leaf in leaves]
+    key = (str(treedef), jax.config.jax_enable_x64,
+           tuple((a.dtype.str, a.shape, a.tobytes()) for a in arrays))
+    if key not in _layered_profiles:
+        R, _ = layers_as_gaussians(list(material.layers), material.base)
+        _layered_profiles[key] = to_gaussian_sum(R)
+        while len(_layered_profiles) > _LAYERED_KEPT:
+            _layered_profiles.popitem(last=False)
+    _layered_profiles.move_to_end(key)
+    return _layered_profiles[key]
 
 
 def exact_profile(material: Material, r) -> np.ndarray:

@@ -261,3 +261,25 @@ def test_examples_do_what_their_comments_say():
     assert "skin_backlit" in next(e.basis for e in skin.estimates if e.method == "lambert")
     ketchup = plan_scene(load_scene(EXAMPLES / "ketchup_plane.toml"), method="texture-space")
     assert not ketchup.on("stretch correction")
+
+
+def test_a_layered_profile_is_kept_by_its_numbers_and_a_changed_stack_is_computed_anew():
+    """Planning asks for the stack's profile three times; it is kept, keyed by the stack's
+    numbers. A thicker top layer (same object structure) must not be served the kept one:
+    both equal a fresh Kubelka-Munk stack."""
+    import dataclasses
+
+    from jsss.gaussians import layers_as_gaussians, to_gaussian_sum
+    from jsss.render.profiles import full_profile
+
+    material = parse_scene(scene_dict(material={"preset": "skin"})).material
+    top = material.layers[0]
+    thicker = dataclasses.replace(material, layers=(dataclasses.replace(top, thickness=2 * top.thickness),
+                                                    *material.layers[1:]))
+    for m in (material, thicker, material):
+        expected = to_gaussian_sum(layers_as_gaussians(list(m.layers), m.base)[0])
+        got = full_profile(m)
+        np.testing.assert_array_equal(got.weights, expected.weights)
+        np.testing.assert_array_equal(got.variances, expected.variances)
+    assert full_profile(material) is full_profile(material)
+    assert not np.array_equal(full_profile(thicker).weights, full_profile(material).weights)
