@@ -196,7 +196,7 @@ def depth_falloff(g: LightGeometry, depth, dtype):
     return jnp.where(finite, d**2 / (d**2 + 2 * depth * d * cos + depth**2), 1.0)
 
 
-def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None, deposit=None):
+def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None, deposit=None, law=None):
     """Light transmitted into the surface at each point (..., C).
 
     With ``medium`` (a homogeneous Medium) each light's share is scaled by how much more of it
@@ -213,9 +213,15 @@ def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None, deposi
         Each light's colour times intensity (differentiable).
     eta : array, shape (C,)
         Relative index of refraction of the material.
+    law : callable, optional, keyword-only
+        ``incidence_law(medium)`` solved already, in place of ``medium`` (normal filtering
+        lights one frame three times, once per channel's normals, with one law).
     """
+    if law is not None and medium is not None:
+        raise ValueError("irradiance: pass medium (the law is solved here) or law (solved already), not both.")
     total = 0.0
-    law = incidence_law(medium) if medium is not None else None  # one H solve for every light
+    if medium is not None:
+        law = incidence_law(medium)  # one H solve for every light
     for i, g in enumerate(lights):
         cos = jnp.clip(jnp.asarray(g.cosine, radiant.dtype), 0.0, 1.0)
         transmitted = fresnel_transmittance(cos[..., None], eta)

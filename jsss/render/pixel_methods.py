@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
+from ..incidence import incidence_law
 from .image_space import (CameraBuffers, SampledProfile, camera_buffers, image_space_exitance, profile_radius,
                           rms_radius)
 from .lighting import irradiance, light_geometry, shadow_map
@@ -112,7 +113,8 @@ def pixel_exitance(method: str, profile: SampledProfile, radiant, eta, prep: Pix
     dtype = radiant.dtype
     albedo = profile.albedo().astype(dtype)
     if method == "normal filtering":
-        channels = [irradiance([g.astype(dtype) for g in lights], radiant, eta, medium=oblique,
+        law = incidence_law(oblique) if oblique is not None else None  # one H solve for the three channels
+        channels = [irradiance([g.astype(dtype) for g in lights], radiant, eta, law=law,
                                deposit=deposit)[..., c] for c, lights in enumerate(prep.channel_lights)]
         return albedo * jnp.stack(channels, -1)
     E = irradiance([g.astype(dtype) for g in prep.lights], radiant, eta, medium=oblique, deposit=deposit)

@@ -81,3 +81,22 @@ def test_parallel_light_is_not_read_deeper():
     scene = _slanted_plane(1.0)
     plan = plan_scene(scene, method="lambert")
     assert not plan.on("deposit depth") and "no point light" in plan.describe()
+
+
+def test_irradiance_takes_a_solved_law_in_place_of_the_medium_and_not_both():
+    """Normal filtering lights a frame once per channel's normals with one solved law: the
+    same irradiance as solving it from the medium, to the last bit; both at once is refused."""
+    from jsss.incidence import incidence_law
+    from jsss.render.lighting import LightGeometry, irradiance
+
+    cosine = np.linspace(0.05, 1.0, 12)
+    ones = np.ones_like(cosine)
+    light = LightGeometry(cosine=cosine, falloff=ones, visible=ones, thickness=0 * ones,
+                          front_uv=np.zeros((12, 2)), behind=0 * ones, to_light=np.zeros((12, 3)))
+    medium = Medium([0.01, 0.1, 1.0], [1.0, 1.0, 1.0], [1.3, 1.3, 1.3])
+    radiant, eta = np.ones((1, 3)), np.full(3, 1.3)
+    solved = irradiance([light], radiant, eta, law=incidence_law(medium))
+    np.testing.assert_array_equal(solved, irradiance([light], radiant, eta, medium=medium))
+    assert np.all(np.asarray(solved)[:-1] / np.asarray(irradiance([light], radiant, eta))[:-1] > 1)  # slant: more
+    with pytest.raises(ValueError, match="not both"):
+        irradiance([light], radiant, eta, medium=medium, law=incidence_law(medium))
