@@ -125,12 +125,15 @@ def geometric_series(a: PolyGaussian, *, tol: float = 1e-4, max_terms: int = 200
     # count = n_terms + 1 powers a^0 .. a^n_terms; walk its binary digits from the top
     count = n_terms + 1
     series, power = identity, a  # S_1 = 1, a^1
-    for bit in bin(count)[3:]:
+    digits = bin(count)[3:]
+    for i, bit in enumerate(digits):
         series = poly_add(series, multiply(series, power))  # S_2n = S_n + a^n S_n
-        power = multiply(power, power)  # a^2n
         if bit == "1":
             series = poly_add(identity, multiply(series, a))  # S_2n+1 = 1 + a S_2n
-            power = multiply(power, a)
+        if i < len(digits) - 1:  # the last digit's power would never be read
+            power = multiply(power, power)  # a^2n
+            if bit == "1":
+                power = multiply(power, a)  # a^2n+1
     return series
 
 
