@@ -393,10 +393,9 @@ def deposit_depth_decision(scene, target):
     material = scene.material
     if material.medium is None:
         return False, f"needs a homogeneous medium; material is {material.kind}"
-    points = [light for light in scene.lights if light.kind == "point"]
-    if not points:
-        return False, "no point light (parallel rays do not spread below the surface)"
     change, nearest, depth = deposit_change(scene)
+    if np.isinf(nearest):
+        return False, "no point light (parallel rays do not spread below the surface)"
     on = bool(change >= target / 4)
     return on, (f"a point light {nearest:.0f} mm away, read {depth:.2f} mm deep where light scatters: "
                 f"{100 * change:.1f} % less under the lamp ({'>=' if on else '<'} a quarter of the target, "
