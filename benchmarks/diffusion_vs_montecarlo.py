@@ -25,8 +25,8 @@ import numpy as np  # noqa: E402
 from scipy.integrate import quad  # noqa: E402
 
 from jsss import Medium, dipole  # noqa: E402
-from jsss.montecarlo import random_walk  # noqa: E402
-from jsss.multipole import slab_totals  # noqa: E402
+from jsss.transport.montecarlo import random_walk  # noqa: E402
+from jsss.diffusion.multipole import slab_totals  # noqa: E402
 
 ALBEDOS = (0.5, 0.8, 0.9, 0.95, 0.99, 0.999)
 ETAS = (1.0, 1.3, 1.5)

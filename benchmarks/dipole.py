@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, os.path.dirname(__file__))
 from _timing import median_seconds  # noqa: E402
 
-from jsss.dipole import profile  # noqa: E402
+from jsss.diffusion.dipole import profile  # noqa: E402
 from jsss.materials import jensen2001  # noqa: E402
 
 

@@ -30,8 +30,8 @@ sys.path.insert(0, os.path.dirname(__file__))
 from _timing import median_seconds  # noqa: E402
 
 from jsss import dipole, hankel  # noqa: E402
-from jsss.layers import combine_spectra, layer_boundaries, relative_to, skin_three_layer, stack  # noqa: E402
-from jsss.multipole import slab_profiles, unscattered_transmittance  # noqa: E402
+from jsss.layers.kubelka_munk import combine_spectra, layer_boundaries, relative_to, skin_three_layer, stack  # noqa: E402
+from jsss.diffusion.multipole import slab_profiles, unscattered_transmittance  # noqa: E402
 
 
 # ----------------------------------------------------------------------------- NumPy baseline

@@ -10,7 +10,7 @@ preparation, and the speed-up over the reference computed in the same run.
     python benchmarks/methods.py [--quick] [--calibrate] [--figure docs/methods.png]
     python benchmarks/methods.py --validate-only
 
-``--calibrate`` writes the rows to jsss/render/calibration.json, the table the planner
+``--calibrate`` writes the rows to jsss/data/calibration.json, the table the planner
 reads; ``--figure`` saves the near frames side by side with their error maps. Every run
 ends with the leave-one-scene-out check of the table in use (each scene's frames predicted
 from the other scenes' rows: the predicted and measured error of what the planner would
@@ -75,7 +75,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="64 x 48 frames, 100k reference points "
                         "(default 96 x 72, 300k)")
-    parser.add_argument("--calibrate", action="store_true", help="write jsss/render/calibration.json")
+    parser.add_argument("--calibrate", action="store_true", help="write jsss/data/calibration.json")
     parser.add_argument("--figure", type=Path, default=None, help="save the near frames and error maps")
     parser.add_argument("--validate-only", action="store_true", help="only the leave-one-scene-out check of the table")
     args = parser.parse_args()

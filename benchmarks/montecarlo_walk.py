@@ -2,7 +2,7 @@
 
 Semi-infinite medium, sigma_t = 1/mm, g = 0, eta = 1.3, a pencil beam entering at normal
 incidence, absorption by weight with Russian roulette below 1e-4 (one in ten survives),
-Fresnel reflection at the boundary: the same physics as `jsss.montecarlo.random_walk`. Both
+Fresnel reflection at the boundary: the same physics as `jsss.transport.montecarlo.random_walk`. Both
 walks must give the same total reflectance within standard errors; the table gives photons
 per second (median of repeats, after a warm-up that compiles both) and their ratio.
 
@@ -26,7 +26,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from jsss import Medium  # noqa: E402
-from jsss.montecarlo import random_walk  # noqa: E402
+from jsss.transport.montecarlo import random_walk  # noqa: E402
 
 try:
     import numba

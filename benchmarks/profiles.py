@@ -1,6 +1,6 @@
 """Profile models against radiative-transfer truth: dipole vs the scaled Monte Carlo tables.
 
-Truth: `jsss.montecarlo.random_walk` with absorption in the walk (not applied afterwards),
+Truth: `jsss.transport.montecarlo.random_walk` with absorption in the walk (not applied afterwards),
 seeds unrelated to the tables', tallied on annuli of +-10 % around each radius. A model's
 value is its own average over the same annulus (Gauss-Legendre over r dr). Reported per
 (albedo', eta, g): the relative error of R(r) at 0.1-20 transport lengths (blank where the
@@ -27,7 +27,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 from _timing import median_seconds  # noqa: E402
 
 from jsss import Medium, dipole, transport  # noqa: E402
-from jsss.montecarlo import random_walk  # noqa: E402
+from jsss.transport.montecarlo import random_walk  # noqa: E402
 
 RADII = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0)  # transport lengths 1/(sigma_a + sigma_s')
 ALBEDOS = (0.5, 0.9, 0.99, 0.999, 0.9999)  # reduced albedo sigma_s' / (sigma_a + sigma_s')

@@ -226,11 +226,11 @@ CHANDRASEKHAR_CASES = ((1.0, 0.0), (50.0, 0.0), (50.0, 45.0), (20.0, 60.0))  # (
 
 def chandrasekhar_check(mi, *, albedo=0.18 / 0.241, spp=4096, chunks=2):
     """Mitsuba's index-matched frames of a large, uniformly lit plane against Chandrasekhar's
-    exact reflection of every order (:func:`jsss.incidence.index_matched_brdf`): the truth
+    exact reflection of every order (:func:`jsss.diffusion.incidence.index_matched_brdf`): the truth
     pipeline itself checked against a closed form. Rows (view deg, light deg, Mitsuba L/E,
     closed form L/E, noise of Mitsuba's mean, jsss's L/E without and with the oblique-incidence
     pass: Lambert frames, single scattering on, transport profile)."""
-    from jsss.incidence import index_matched_brdf
+    from jsss.diffusion.incidence import index_matched_brdf
     from jsss.render import parse_scene
 
     rows = []

@@ -24,8 +24,8 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from jsss import dipole
-from jsss.gaussian_sum import GaussianSum
+from jsss.diffusion import dipole
+from jsss.gaussians.gaussian_sum import GaussianSum
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
 

@@ -39,8 +39,10 @@ import numpy as np
 import optimistix as optx
 import scipy.sparse
 
-from jsss import dipole, hankel, transport
-from jsss.cache import reusable_program
+from jsss import transport
+from jsss.diffusion import dipole
+from jsss.layers import hankel
+from fitting.programs import reusable_program
 from jsss.fresnel import exit_lobe
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
@@ -305,7 +307,7 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
         0.01 to 10 mm, the best kept (every start runs until the slowest is done: about
         7 times the cost).
     grid : HankelGrid, optional, keyword-only
-        The transform grid (default :func:`jsss.hankel.hankel_grid`, built once per process).
+        The transform grid (default :func:`jsss.layers.hankel.hankel_grid`, built once per process).
 
     Returns
     -------

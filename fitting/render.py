@@ -17,7 +17,7 @@ in the medium), a weighted sum of those images and the per-pixel shading (single
 included). The variances are planned for the starting material; if the fitted profile is not
 represented on them to the plan's accuracy, they are re-planned and the fit is repeated from
 there (at most ``replans`` times); so are the oblique-incidence law that scales the irradiance
-and the depth at which point lights are read (:mod:`jsss.incidence`), which depend on the
+and the depth at which point lights are read (:mod:`jsss.diffusion.incidence`), which depend on the
 medium (their change within the last round is not in the Jacobian). The pixel methods
 (Lambert, normal filtering, image-space) are differentiated through their whole frame.
 
@@ -44,9 +44,10 @@ import numpy as np
 import optimistix as optx
 from scipy import ndimage
 
-from jsss import dipole, transport
+from jsss import transport
+from jsss.diffusion import dipole
 from jsss.fresnel import exit_lobe
-from jsss.incidence import incidence_ratio
+from jsss.diffusion.incidence import incidence_ratio
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
 from jsss.render import plan_scene
@@ -54,6 +55,7 @@ from jsss.render.planner import deposit_change
 from jsss.render.image_space import camera_buffers
 from jsss.render.lighting import lookup
 from jsss.render.mesh import distance_to_rim
+from jsss.render.passes import Method, Pass
 from jsss.render.pixel_methods import pixel_radiance, prepare_pixels
 from jsss.render.profiles import render_profile
 from jsss.render.renderer import (
@@ -243,7 +245,7 @@ def _texture_data(scene: Scene, plan, dtype, blur_dtype=jnp.float32) -> _Texture
         M = exitance_pass(term, prep, plan, blurred[i:i + 1])
         images.append(lookup(M, prep.pixel_uv, prep.texels.mask).astype(dtype))
     lights = tuple(g.astype(dtype) for g in prep.pixel_lights)
-    if plan.on("specular"):
+    if plan.on(Pass.SPECULAR):
         spec = specular_radiance(prep.pixel_normal, prep.pixel_view, lights, params.radiant, params.eta,
                                  roughness=scene.material.roughness, weight=scene.material.specular)
     else:
@@ -251,7 +253,7 @@ def _texture_data(scene: Scene, plan, dtype, blur_dtype=jnp.float32) -> _Texture
     cos_view = jnp.asarray((prep.pixel_normal * prep.pixel_view).sum(-1), dtype)
     # Jensen's single-scattering BRDF (HG g = 0 on the reduced coefficients) is the albedo
     # sigma_s'/sigma_t' times a factor of the geometry and eta alone: evaluated once at albedo 1.
-    if plan.on("single scattering") and params.medium is not None:
+    if plan.on(Pass.SINGLE_SCATTERING) and params.medium is not None:
         unit = Medium(jnp.zeros(3, dtype), jnp.ones(3, dtype), params.eta)
         single_radiance, single_exitance = single_scattering(unit, prep.pixel_normal, prep.pixel_view, lights,
                                                              params.radiant, deposit=params.deposit)
@@ -350,7 +352,7 @@ def _solve(residuals, theta0, args, *, max_steps, rtol, atol):
 
 def _model_for(scene, plan, dtype, profile_model, g):
     """The forward model ``render(medium, data)`` and its data for one plan."""
-    if plan.method == "texture-space":
+    if plan.method == Method.TEXTURE_SPACE:
         return _texture_render(profile_model, g), _texture_data(scene, plan, dtype)
     start = render_params(scene, plan, dtype=dtype)
     prep = prepare_pixels(scene, plan.method, start.profile, normal_filter=plan.normal_filter)
@@ -361,8 +363,8 @@ def _model_for(scene, plan, dtype, profile_model, g):
         p = render_params(scene, plan, medium=medium, dtype=dtype, radii=radii)
         return pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples, oblique=p.oblique,
                               deposit=p.deposit,
-                              specular=plan.on("specular"), roughness=material.roughness,
-                              specular_weight=material.specular, single_scattering=plan.on("single scattering"),
+                              specular=plan.on(Pass.SPECULAR), roughness=material.roughness,
+                              specular_weight=material.specular, single_scattering=plan.on(Pass.SINGLE_SCATTERING),
                               medium=p.medium)
     return render, ()
 
@@ -468,12 +470,12 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         fit_scene = dataclasses.replace(scene, material=dataclasses.replace(
             material, medium=medium, profile_model=profile_model, g=g))
         plan = plan_scene(fit_scene, accuracy=accuracy, method=method, samples=samples)
-        if method is None and plan.method == "texture-space":
+        if method is None and plan.method == Method.TEXTURE_SPACE:
             # The calibration picks the cheapest knob of a frame's error; a fit needs the profile
             # itself at ``accuracy`` (a 5-Gaussian profile 7 % off biased marble's sigma_a 3x).
-            plan = plan_scene(fit_scene, accuracy=accuracy, method="texture-space")
+            plan = plan_scene(fit_scene, accuracy=accuracy, method=Method.TEXTURE_SPACE)
         if not specular:
-            plan = plan.replace("specular", False, "the photo holds subsurface light only")
+            plan = plan.replace(Pass.SPECULAR, False, "the photo holds subsurface light only")
         return fit_scene, plan
 
     say(f"round 1: planning the fit's renders (accuracy {100 * accuracy:g} %)")
@@ -511,7 +513,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         changed = [d.name for d, e in zip(plan.decisions, next_plan.decisions) if d.on != e.on]
         if next_plan.method != plan.method or next_plan.texture_size != plan.texture_size:
             changed.append("method or texture size")
-        elif plan.method == "texture-space":
+        elif plan.method == Method.TEXTURE_SPACE:
             if len(next_plan.variances) != len(plan.variances):
                 changed.append("number of Gaussians")
             elif (moved := np.max(np.abs(np.log(next_plan.variances / plan.variances)))) > 0.1:
@@ -519,9 +521,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
             # The fixed passes hold the irradiance scaled by the round's own laws; a move below
             # LAW_REPLAN changes every pixel by less than that, and another round of blurs for it
             # made the test suite's fits 1.5-3x slower.
-            if plan.on("oblique incidence") and (moved := _incidence_moved(fit_scene, next_scene)) > LAW_REPLAN:
+            if plan.on(Pass.OBLIQUE_INCIDENCE) and (moved := _incidence_moved(fit_scene, next_scene)) > LAW_REPLAN:
                 changed.append(f"oblique-incidence law (moved by up to {100 * moved:.2f} %)")
-            if plan.on("deposit depth") and (moved := abs(deposit_change(next_scene)[0]
+            if plan.on(Pass.DEPOSIT_DEPTH) and (moved := abs(deposit_change(next_scene)[0]
                                                           - deposit_change(fit_scene)[0])) > LAW_REPLAN:
                 changed.append(f"deposit depth (irradiance under the lamp moved by {100 * moved:.2f} %)")
         if not changed:

@@ -1,26 +1,18 @@
 """jsss: differentiable subsurface scattering in JAX.
 
-Public modules: :mod:`jsss.dipole`, :mod:`jsss.single_scattering`, :mod:`jsss.brdf`,
-:mod:`jsss.fresnel`, :mod:`jsss.materials`,
-:mod:`jsss.multipole`, :mod:`jsss.hankel`, :mod:`jsss.layers`, :mod:`jsss.transport` (profiles exact to
-radiative transfer), :mod:`jsss.montecarlo`. Lengths in mm, coefficients in 1/mm.
+Subpackages follow the papers: :mod:`jsss.diffusion` (dipole, single scattering, BRDF,
+multipole, oblique incidence, sampling), :mod:`jsss.layers` (Hankel transform, Kubelka-Munk
+stacks), :mod:`jsss.gaussians` (sums of Gaussians and their closed-form fits),
+:mod:`jsss.transport` (the Monte Carlo truth and the profiles exact to radiative transfer) and
+:mod:`jsss.render`. The most used modules are re-exported here (``from jsss import dipole``).
+Lengths in mm, coefficients in 1/mm.
 """
 
-from . import (
-    brdf,
-    dipole,
-    fresnel,
-    gaussians,
-    hankel,
-    layers,
-    materials,
-    montecarlo,
-    multipole,
-    numerics,
-    sampling,
-    single_scattering,
-    transport,
-)
+from . import fresnel, materials, numerics
+from .diffusion import brdf, dipole, incidence, multipole, sampling, single_scattering
+from .layers import hankel
+from .transport import montecarlo
+from . import diffusion, gaussians, layers, transport
 from .medium import Medium as Medium
 from .medium import reduced_albedo as reduced_albedo
 
@@ -40,10 +32,12 @@ __all__ = [
     "Medium",
     "__version__",
     "brdf",
+    "diffusion",
     "dipole",
     "fresnel",
     "gaussians",
     "hankel",
+    "incidence",
     "layers",
     "materials",
     "montecarlo",

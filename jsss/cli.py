@@ -12,7 +12,7 @@ def _table() -> int:
     jax.config.update("jax_enable_x64", True)
     import numpy as np
 
-    from .dipole import total_reflectance
+    from .diffusion.dipole import total_reflectance
     from .materials import jensen2001, jensen2001_table
 
     print(f"{'material':<11} {'eta':>4}  {'published R,G,B':>17}  {'dipole R,G,B':>20}  max |diff|")
@@ -46,7 +46,7 @@ def info_lines() -> list[str]:
     import jax
 
     from . import __version__
-    from .cache import compilation_cache_dir, default_cache_dir
+    from fitting.programs import compilation_cache_dir, default_cache_dir
 
     jax_cache = compilation_cache_dir() or "off (JSSS_COMPILATION_CACHE=0)"
     try:

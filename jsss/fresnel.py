@@ -166,7 +166,7 @@ def exit_lobe(cos_exit, eta):
     the Fresnel-transmitted share of a radiance that is isotropic over the inside hemisphere,
     normalised so that :math:`\int L\cos\theta_o\,d\omega_o = M` exactly
     (:func:`diffuse_fresnel_transmittance`). The renderer spreads exitance with it, and
-    :func:`jsss.dipole.radiance` is the dipole's exitance times it. Transport is not this
+    :func:`jsss.diffusion.dipole.radiance` is the dipole's exitance times it. Transport is not this
     simple: near the source (and at low albedo) light leaves at grazing angles, so a camera
     looking down sees less (:func:`jsss.transport.radiance`).
 

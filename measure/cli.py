@@ -37,7 +37,7 @@ def _enable_x64():
     Once per process (a batch worker calls it for every image)."""
     import jax
 
-    from jsss.cache import enable_compilation_cache
+    from fitting.programs import enable_compilation_cache
 
     jax.config.update("jax_enable_x64", True)
     enable_compilation_cache()
@@ -46,8 +46,8 @@ def _enable_x64():
 @functools.lru_cache(maxsize=None)
 def _grid():
     """The fits' Hankel grid, once per process, and from disk after the first start (building
-    it is 3 s of Bessel functions; see :func:`jsss.cache.stored_hankel_grid`)."""
-    from jsss.cache import stored_hankel_grid
+    it is 3 s of Bessel functions; see :func:`fitting.programs.stored_hankel_grid`)."""
+    from fitting.programs import stored_hankel_grid
 
     _enable_x64()  # the grid's dtype, and the cache it is kept in
     return stored_hankel_grid()
@@ -166,7 +166,8 @@ def _plot(result, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from jsss import dipole, transport
+    from jsss import transport
+    from jsss.diffusion import dipole
 
     prof = result.profile
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -247,7 +248,7 @@ def _write_exports(result, args, stem) -> list[str]:
     """The fitted material for other renderers (--export) and as a jsss scene (--scene).
 
     Returns the lines that say what was written (stdout, or stderr with --json)."""
-    from jsss import export
+    from . import export
 
     said = []
     medium, g = result.fit.medium, result.g

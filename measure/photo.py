@@ -1,6 +1,6 @@
 """Camera photos in: raw files (rawpy), 16-bit TIFF/PNG and OpenEXR, read linearly.
 
-Every reader returns an :class:`~jsss.exr.ExrImage`: float64 pixels ``(H, W, 3)`` (or the
+Every reader returns an :class:`~measure.exr.ExrImage`: float64 pixels ``(H, W, 3)`` (or the
 EXR's channels), normalised so that the sensor's clip level is 1.0 for raw and integer files,
 and a header with what the fit needs from the file:
 
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jsss.exr import ExrError, ExrImage, read_exr
+from measure.exr import ExrError, ExrImage, read_exr
 
 __all__ = ["NonLinearWarning", "PhotoError", "RAW_SUFFIXES", "read_image"]
 

@@ -105,7 +105,7 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     The beam centre and width come from the reference. The fit models the beam, and bins
     start at ``r_min_mm`` (default: the larger of 2 pixels and 2 beam widths), where the
     image is dominated by the sample rather than by the beam's core. ``grid`` is the
-    Hankel grid of the model (build one with :func:`jsss.hankel.hankel_grid` and pass it
+    Hankel grid of the model (build one with :func:`jsss.layers.hankel.hankel_grid` and pass it
     when fitting many measurements). ``model`` and ``g`` choose the profile model (see
     :func:`fitting.medium.fit_medium`); ``fit_options`` passes its solver options (``init``,
     ``n_starts``, ``max_steps``, ``rtol``, ``atol``).

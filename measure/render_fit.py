@@ -24,6 +24,8 @@ import sys
 import time
 from pathlib import Path
 
+from jsss.render.passes import Method
+
 PROG = "jsss-render fit"
 
 _EPILOG = """\
@@ -53,8 +55,7 @@ def _parser():
     p.add_argument("--profile", choices=("dipole", "transport"), default=None,
                    help="profile model (default: the scene's; transport is exact to radiative transfer)")
     p.add_argument("--g", type=float, default=None, help="Henyey-Greenstein g of the transport profile")
-    p.add_argument("--method", default="auto", choices=("auto", "lambert", "normal-filtering", "image-space",
-                                                         "texture-space"),
+    p.add_argument("--method", default="auto", choices=("auto", *(m.option for m in Method)),
                    help="render method during the fit (default: the planner's choice for --accuracy)")
     p.add_argument("--accuracy", type=float, default=0.001,
                    help="accuracy target of the fit's renders (default 0.001: a fit needs a stricter render than "
@@ -167,7 +168,7 @@ def _run(args, say) -> int:
         raise ValueError(f"--noise must be > 0; got {args.noise}.")
     if not 0 < args.accuracy < 1:
         raise ValueError(f"--accuracy must lie in (0, 1); got {args.accuracy}.")
-    method = {"auto": None, "normal-filtering": "normal filtering"}.get(args.method, args.method)
+    method = None if args.method == "auto" else Method(args.method)
     t0 = time.perf_counter()
     result = fit_render(scene, photo, noise=args.noise, mask=mask, saturation=args.saturation, method=method,
                         accuracy=args.accuracy, profile_model=args.profile, g=args.g, gain=not args.no_gain,
@@ -212,7 +213,7 @@ def fit_main(argv=None) -> int:
 
     _enable_x64()
     from fitting.render import RenderFitError
-    from jsss.exr import ExrError
+    from measure.exr import ExrError
     from jsss.render import SceneError
 
     start = time.perf_counter()

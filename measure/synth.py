@@ -25,8 +25,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from fitting.medium import observable
-from jsss import dipole, hankel, transport
-from jsss.cache import reusable_program
+from jsss import transport
+from jsss.diffusion import dipole
+from jsss.layers import hankel
+from fitting.programs import reusable_program
 from jsss.medium import Medium
 
 from .exr import write_exr
@@ -133,7 +135,7 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
     g : float, keyword-only
     seed : int, keyword-only
     grid : HankelGrid, optional, keyword-only
-        Transform grid for the beam convolution (default :func:`jsss.hankel.hankel_grid`).
+        Transform grid for the beam convolution (default :func:`jsss.layers.hankel.hankel_grid`).
     """
     rng = np.random.default_rng(seed)
     centre = ((size - 1) / 2 + center_offset[0], (size - 1) / 2 + center_offset[1])

@@ -1,7 +1,7 @@
 r"""Camera images whose truth is radiative transfer: a random walk per channel, not a model.
 
 The truth for testing a fit must not share the fit's assumptions, so these images come from
-photons, not from the transport tables the fit uses: one walk of :mod:`jsss.photon_walk`
+photons, not from the transport tables the fit uses: one walk of :mod:`jsss.transport.photon_walk`
 per channel through the half space of the given medium (absorption by weight, the exact
 Fresnel boundary, Henyey-Greenstein ``g``), with its own seed. Each photon enters at a
 point drawn from the Gaussian beam, and leaves at its recorded radius in a uniformly random
@@ -28,8 +28,8 @@ from scipy.special import erf
 
 from jsss import transport
 from jsss.medium import Medium
-from jsss.montecarlo import _params
-from jsss.photon_walk import run_walk
+from jsss.transport.montecarlo import _params
+from jsss.transport.photon_walk import run_walk
 
 from .synth import SyntheticMeasurement
 

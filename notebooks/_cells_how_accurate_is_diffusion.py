@@ -3,7 +3,7 @@ CELLS = [
 # How accurate is diffusion?
 
 The dipole and the multipole are diffusion approximations. A Monte Carlo random walk
-(`jsss.montecarlo.random_walk`) solves the transport problem they approximate, so it
+(`jsss.transport.montecarlo.random_walk`) solves the transport problem they approximate, so it
 shows where they depart: close to the source, at low albedo, and with index mismatch.
 By default it runs with few photons (4 000 per walk) and a 2 x 4 error map, in about 20 s;
 `JSSS_FULL=1` runs 100 000 photons per walk and a 5 x 9 map (times in notebooks/README.md).
@@ -16,8 +16,8 @@ import numpy as np
 import matplotlib.pyplot as plt
 from jsss import Medium, dipole
 from jsss.materials import jensen2001
-from jsss.multipole import slab_profiles
-from jsss.montecarlo import random_walk
+from jsss.diffusion.multipole import slab_profiles
+from jsss.transport.montecarlo import random_walk
 fast = os.environ.get("JSSS_FULL") != "1"  # JSSS_FULL=1: 100 000 photons, a 5 x 9 map
 photons = 4000 if fast else 100_000
 """),
@@ -113,11 +113,11 @@ Every profile here is for a beam along the normal. Light arriving at an angle th
 deposited nearer the surface, so more of it comes back. For isotropic scattering in an
 index-matched half space the total reflectance is known exactly (Chandrasekhar 1960):
 A(mu0) = 1 - H(mu0) sqrt(1 - albedo), mu0 = cos theta, with Chandrasekhar's H function
-(`jsss.incidence`). The renderer scales each light's irradiance by A(mu0) / A(1), its
+(`jsss.diffusion.incidence`). The renderer scales each light's irradiance by A(mu0) / A(1), its
 "oblique incidence" pass. The walk below starts photons at the given angle and checks it.
 """),
     ("code", """
-from jsss.incidence import plane_albedo
+from jsss.diffusion.incidence import plane_albedo
 cosines = np.linspace(0.1, 1.0, 50)
 fig, ax = plt.subplots(figsize=(6, 3.4))
 for albedo, colour in [(0.75, "tab:red"), (0.95, "tab:green")] + ([] if fast else [(0.999, "tab:blue")]):

@@ -122,7 +122,7 @@ noise. `benchmarks/inverse_rendering.py` fits photos made by a volumetric path t
 the transport profile recovers R_d within 2 % and the mean free path within 15 % on the marble
 sphere and the ketchup plane (README, 2026-12-02), after two effects the profiles leave out
 were added to the renderer: light arriving at a slant returns more (Chandrasekhar's H
-function, `jsss.incidence`), and a nearby lamp's rays keep spreading below the surface. Two
+function, `jsss.diffusion.incidence`), and a nearby lamp's rays keep spreading below the surface. Two
 things a photo cannot give you: R_d when the exposure is unknown (brightness is gain x R_d,
 and only the profile's shape separates them), and the mean free path of a channel whose light
 leaves within a pixel of where it entered (ketchup's blue).

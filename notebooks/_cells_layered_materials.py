@@ -3,7 +3,7 @@ CELLS = [
 # Layered materials: thin slabs, stacks and skin
 
 This tutorial computes reflectance profiles R(r) of a thin slab, a two-layer stack and a
-three-layer skin model with `jsss.multipole` and `jsss.layers`, and compares them with the
+three-layer skin model with `jsss.diffusion.multipole` and `jsss.layers`, and compares them with the
 semi-infinite dipole. Lengths are in mm, profiles in 1/mm^2.
 """),
     ("code", """
@@ -12,8 +12,8 @@ jax.config.update("jax_enable_x64", True)  # reference profiles need float64
 import numpy as np
 import matplotlib.pyplot as plt
 from jsss import Medium, dipole, hankel
-from jsss.multipole import slab_profiles, slab_totals
-from jsss.layers import Layer, stack, skin_three_layer
+from jsss.diffusion.multipole import slab_profiles, slab_totals
+from jsss.layers.kubelka_munk import Layer, stack, skin_three_layer
 grid = hankel.hankel_grid()  # build once (about a second), reuse for every stack
 r = np.asarray(grid.r)
 """),

@@ -96,7 +96,7 @@ print(f"slope {slope:.2f} (the error also holds a bias: light from surfaces the 
 ## The planner chooses from a measured table
 
 `benchmarks/methods.py --calibrate` renders the example scenes from four distances with every
-method and stores error and time in `jsss/render/calibration.json`. For a new scene the planner
+method and stores error and time in `jsss/data/calibration.json`. For a new scene the planner
 looks up frames whose profile spans a similar number of pixels, predicts each method's error and
 time, and takes the cheapest that meets the accuracy target. A looser target or a camera far
 away makes it pick something cheaper:

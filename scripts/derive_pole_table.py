@@ -1,14 +1,14 @@
-"""Regenerate jsss/_pole_weight_table.py: the C_i(x) curves of the empirical pole fit.
+"""Regenerate jsss/data/pole_weight_table.py: the C_i(x) curves of the empirical pole fit.
 
 Run from the repository root: ``python scripts/derive_pole_table.py``. Each row solves the
-constrained least-squares problem of ``jsss.pole_fit.derive_pole_weights`` at one x.
+constrained least-squares problem of ``jsss.gaussians.pole_fit.derive_pole_weights`` at one x.
 """
 
 from pathlib import Path
 
 import numpy as np
 
-from jsss.pole_fit import derive_pole_weights
+from jsss.gaussians.pole_fit import derive_pole_weights
 
 N_NODES = 200
 U_MAX = 0.995
@@ -28,7 +28,7 @@ def main() -> None:
     ]
     lines += ["    [" + ", ".join(f"{c:.10f}" for c in row) + "]," for row in rows]
     lines += ["])", ""]
-    Path(__file__).resolve().parent.parent.joinpath("jsss", "_pole_weight_table.py").write_text("\n".join(lines))
+    Path(__file__).resolve().parent.parent.joinpath("jsss", "data", "pole_weight_table.py").write_text("\n".join(lines))
 
 
 if __name__ == "__main__":

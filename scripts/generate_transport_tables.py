@@ -2,7 +2,7 @@
 
 One absorption-free walk per (eta, g) in transport lengths (sigma_s' = 1, sigma_a = 0),
 capped at --max-path transport lengths (the tail beyond is modelled, see
-jsss.transport_table). The walk is jsss.photon_walk, the engine of jsss.montecarlo: its
+jsss.transport.tables). The walk is jsss.transport.photon_walk, the engine of jsss.transport.montecarlo: its
 numbers are counter-based, so a seed reproduces the tables bit for bit on one platform.
 
 Run from the repository root (float64; about 20 minutes on 2 cores for 500 000 photons):
@@ -29,9 +29,9 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from jsss import Medium  # noqa: E402
-from jsss.montecarlo import _params  # noqa: E402
-from jsss.photon_walk import run_walk  # noqa: E402
-from jsss.transport_table import TableGrid, tabulate  # noqa: E402
+from jsss.transport.montecarlo import _params  # noqa: E402
+from jsss.transport.photon_walk import run_walk  # noqa: E402
+from jsss.transport.tables import TableGrid, tabulate  # noqa: E402
 
 ETAS = (1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6)
 GS = (0.0, 0.5, 0.8, 0.9)

@@ -43,11 +43,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .passes import Method
+
 __all__ = ["CalibrationRow", "FrameFeatures", "MethodEstimate", "choose_method", "default_calibration_path",
            "estimate_methods", "knob_label", "leave_one_scene_out", "load_calibration", "parse_knob",
            "save_calibration"]
 
-METHODS = ("lambert", "normal filtering", "image-space", "texture-space")
+METHODS = tuple(Method)
 _NEIGHBOURHOOD = 2.0  # calibration frames within this factor of reach and of curvature count as alike
 BACKLIT = 0.5  # a frame is back-lit when at least this share of its irradiance travels towards the camera
 FLAT = 0.02  # curvature (RMS radius / object radius) below which a surface counts as flat
@@ -121,11 +123,11 @@ class MethodEstimate:
 
 def knob_label(method: str, *, samples: int = 32, normal_filter: str = "spectral", target: float = 0.05) -> str:
     """The knob of a calibration row: ``"32 spp"``, ``"spectral"``, ``"profile 5 %"`` or ``""``."""
-    if method == "image-space":
+    if method == Method.IMAGE_SPACE:
         return f"{samples} spp"
-    if method == "normal filtering":
+    if method == Method.NORMAL_FILTERING:
         return normal_filter
-    if method == "texture-space":
+    if method == Method.TEXTURE_SPACE:
         return f"profile {100 * target:g} %"
     return ""
 
@@ -133,11 +135,11 @@ def knob_label(method: str, *, samples: int = 32, normal_filter: str = "spectral
 def parse_knob(method: str, knob: str) -> dict:
     """Inverse of :func:`knob_label`: the planner's keyword arguments for a row's knob."""
     try:
-        if method == "image-space":
+        if method == Method.IMAGE_SPACE:
             return {"samples": int(knob.split()[0])}
-        if method == "normal filtering":
+        if method == Method.NORMAL_FILTERING:
             return {"normal_filter": knob}
-        if method == "texture-space":
+        if method == Method.TEXTURE_SPACE:
             return {"target": float(knob.split()[1]) / 100}
     except (IndexError, ValueError):
         raise ValueError(f"calibration knob {knob!r} of {method} is not of the form {knob_label(method)!r}.") from None
@@ -145,7 +147,7 @@ def parse_knob(method: str, knob: str) -> dict:
 
 
 def default_calibration_path() -> Path:
-    return Path(__file__).with_name("calibration.json")
+    return Path(__file__).resolve().parent.parent / "data" / "calibration.json"
 
 
 def load_calibration(path=None) -> tuple[CalibrationRow, ...]:
@@ -227,7 +229,7 @@ def estimate_methods(rows, features: FrameFeatures, work: dict) -> list[MethodEs
         # scale with the work; so does texture space's texel bake, while the normal filter's
         # preparation is mostly the mesh's eigenvectors, which do not follow the pixels.
         ms = float(np.median([r.ms * work[method] / r.work
-                              + r.prep_ms * (work[method] / r.work if method == "texture-space" else 1.0)
+                              + r.prep_ms * (work[method] / r.work if method == Method.TEXTURE_SPACE else 1.0)
                               for r in basis_rows]))
         estimates.append(MethodEstimate(method, knob, worst.error, ms, basis))
     return sorted(estimates, key=lambda e: e.ms)

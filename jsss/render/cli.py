@@ -16,6 +16,8 @@ import sys
 import time
 from pathlib import Path
 
+from .passes import Method
+
 _EPILOG = """\
 examples:
   jsss-render examples/marble_sphere.toml -o marble.png --plan --timings
@@ -43,7 +45,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--timings", action="store_true", help="time each pass (compiles first, median of 3)")
     p.add_argument("--accuracy", type=float, default=None, help="override the scene's accuracy target")
     p.add_argument("--method", default="auto",
-                   choices=("auto", "lambert", "normal-filtering", "image-space", "texture-space"),
+                   choices=("auto", *(m.option for m in Method)),
                    help="how to render subsurface light (default: the planner's choice from its calibration table)")
     p.add_argument("--samples", type=int, default=None, help="image-space samples per pixel")
     p.add_argument("--normal-filter", default="spectral", choices=("spectral", "naive"),
@@ -84,7 +86,7 @@ def _render_one(scene_path, output: Path, args, say) -> list[str]:
     import jax.numpy as jnp
     import matplotlib.image
 
-    from ..exr import write_exr
+    from measure.exr import write_exr
     from . import SceneError, load_scene, plan_scene, render
     from .shading import tone_map
 
@@ -92,7 +94,7 @@ def _render_one(scene_path, output: Path, args, say) -> list[str]:
     scene = load_scene(scene_path)
     if args.accuracy is not None and not 0 < args.accuracy < 1:
         raise SceneError(f"--accuracy must lie in (0, 1); got {args.accuracy}.")
-    method = {"auto": None, "normal-filtering": "normal filtering"}.get(args.method, args.method)
+    method = None if args.method == "auto" else Method(args.method)
     say(f"{scene_path}: planning (fits the material's profile)")
     plan = plan_scene(scene, accuracy=args.accuracy, method=method, samples=args.samples,
                       normal_filter=args.normal_filter)
@@ -121,11 +123,14 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)  # planning fits profiles in float64
-    from ..cache import enable_compilation_cache
+    from fitting.programs import enable_compilation_cache
 
     enable_compilation_cache()  # a command's compiled programs are kept on disk for the next run
+    from .normal_filter import keep_spectra_in
+    from fitting.programs import default_cache_dir
+    keep_spectra_in(default_cache_dir())
 
-    from ..exr import ExrError
+    from measure.exr import ExrError
     from . import SceneError
 
     say = _Progress(not args.quiet and sys.stderr.isatty())

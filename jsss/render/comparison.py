@@ -18,6 +18,7 @@ import numpy as np
 
 from .calibration import CalibrationRow
 from .mesh import is_closed
+from .passes import Method
 from .planner import SAMPLE_KNOBS, TEXTURE_KNOBS, plan_scene
 from .reference import ReferenceFrame, reference_radiance
 from .renderer import render
@@ -25,11 +26,11 @@ from .scene import Scene
 
 __all__ = ["MethodFrame", "VARIANTS", "compare_methods", "relative_rms", "scene_at_distance"]
 
-VARIANTS = (("lambert", {}),
-            ("normal filtering", {"normal_filter": "naive"}),
-            ("normal filtering", {"normal_filter": "spectral"}),
-            *(("image-space", {"samples": n}) for n in SAMPLE_KNOBS),
-            *(("texture-space", {"accuracy": a}) for a in TEXTURE_KNOBS))
+VARIANTS = ((Method.LAMBERT, {}),
+            (Method.NORMAL_FILTERING, {"normal_filter": "naive"}),
+            (Method.NORMAL_FILTERING, {"normal_filter": "spectral"}),
+            *((Method.IMAGE_SPACE, {"samples": n}) for n in SAMPLE_KNOBS),
+            *((Method.TEXTURE_SPACE, {"accuracy": a}) for a in TEXTURE_KNOBS))
 _PREP = ("plan", "texture geometry", "shadows", "camera raster", "camera raster + shadows", "normal filter")
 _OWN_PREP = ("texture geometry", "normal filter")  # one-time work only that method does
 
@@ -70,13 +71,13 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
     frames = []
     for method, knobs in variants:
         plan = plan_scene(scene, method=method, **knobs)
-        plan = plan.replace("specular", False, "diffuse only: the lobe is the same in every method")
-        plan = plan.replace("single scattering", False, "diffusion only: the reference integrates the profile")
+        plan = plan.replace(Pass.SPECULAR, False, "diffuse only: the lobe is the same in every method")
+        plan = plan.replace(Pass.SINGLE_SCATTERING, False, "diffusion only: the reference integrates the profile")
         result = render(scene, plan, dtype=jnp.float32, time_passes=True, repeats=repeats)
         frame_ms = 1000 * sum(t for k, t in result.timings.items() if k not in _PREP)
         prep_ms = 1000 * sum(t for k, t in result.timings.items() if k in _PREP)
         own_ms = 1000 * sum(t for k, t in result.timings.items() if k in _OWN_PREP)
-        work = plan.texture_size**2 if method == "texture-space" else scene.camera.width * scene.camera.height
+        work = plan.texture_size**2 if method == Method.TEXTURE_SPACE else scene.camera.width * scene.camera.height
         knob = plan.knob
         features = plan.features
         row = CalibrationRow(name, round(plan.blur_pixels, 4), method, knob,
@@ -84,7 +85,7 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
                              int(work), round(own_ms, 3), is_closed(scene.mesh),
                              blur_frame=round(features.blur_frame, 6), backlit=round(features.backlit, 4),
                              curvature=round(features.curvature, 5))
-        gaussians = len(plan.variances) if method == "texture-space" else 0
+        gaussians = len(plan.variances) if method == Method.TEXTURE_SPACE else 0
         frames.append(MethodFrame(row, result.radiance, prep_ms, gaussians))
         if progress is not None:
             progress(f"{name}: {method} {knob}: {100 * row.error:.2f} % in {frame_ms:.1f} ms")

@@ -24,7 +24,7 @@ uses the *true* distance :math:`|x - p_i|` (Mertens' weight :math:`R_d(r_i)/R_d(
 :math:`q` is the dipole's own density).
 
 Variance reduction (sec. 6.1): radii are drawn exactly from the profile (the dipole by
-:func:`jsss.sampling.sample_dipole_radius`, a Gaussian sum by picking a Gaussian), a fixed
+:func:`jsss.diffusion.sampling.sample_dipole_radius`, a Gaussian sum by picking a Gaussian), a fixed
 share of samples uniformly over a disc of radius :math:`R'` for shadow borders where few
 importance samples land, combined with the balance heuristic
 :math:`q = N_{imp}\,q_{imp} + N_{uni}\,q_{uni}`; the sample pattern is a low-discrepancy
@@ -60,10 +60,10 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.integrate import trapezoid as _trapezoid
 
-from .. import dipole
+from ..diffusion import dipole
 from ..medium import Medium
 from ..numerics import is_concrete, safe_sqrt
-from ..sampling import sample_dipole_radius
+from ..diffusion.sampling import sample_dipole_radius
 from .mesh import Mesh
 from .raster import PerspectiveView, Raster, antialiased_raster, surface_attributes
 

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..fresnel import fresnel_transmittance
-from ..incidence import deposit_depth, incidence_law
+from ..diffusion.incidence import deposit_depth, incidence_law
 from .mesh import Mesh
 from .raster import OrthographicView, PerspectiveView, rasterize, surface_attributes
 
@@ -201,10 +201,10 @@ def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None, deposi
 
     With ``medium`` (a homogeneous Medium) each light's share is scaled by how much more of it
     the half space returns for its angle than for a normal beam
-    (:func:`jsss.incidence.incidence_ratio`): the profiles are for normal incidence, so this
+    (:func:`jsss.diffusion.incidence.incidence_ratio`): the profiles are for normal incidence, so this
     is the irradiance a normal beam would need to return the same light. With ``deposit`` (a
     Medium) point lights are read at its deposit depth (:func:`depth_falloff`,
-    :func:`jsss.incidence.deposit_depth`).
+    :func:`jsss.diffusion.incidence.deposit_depth`).
 
     Parameters
     ----------

@@ -22,7 +22,9 @@ Two filters, both per colour channel:
   constant: a Gaussian of variance :math:`v` transfers :math:`e^{-\omega^2 v/2}`.
 
 Eigenvectors are expensive (a sparse shift-invert solve) and depend only on the mesh, so
-:func:`laplacian_spectrum` caches them on disk keyed by :meth:`Mesh.digest`.
+:func:`laplacian_spectrum` keeps them for the process, keyed by :meth:`Mesh.digest`, and on disk
+only where asked (``cache_dir=``, or a folder a console script named with
+:func:`keep_spectra_in`): library code writes no file of its own accord.
 """
 
 from __future__ import annotations
@@ -37,11 +39,16 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..cache import default_cache_dir
 from .mesh import Mesh, weld
 
-__all__ = ["Spectrum", "cotangent_laplacian", "default_cache_dir", "laplacian_spectrum", "smooth_normals",
+__all__ = ["Spectrum", "cotangent_laplacian", "keep_spectra_in", "laplacian_spectrum", "smooth_normals",
            "spectral_filter"]
+
+# Where laplacian_spectrum keeps spectra on disk when no cache_dir is given: None (the library's
+# default) keeps them in memory only; console scripts name a folder with keep_spectra_in.
+_spectra_dir: Path | None = None
+_in_memory: dict = {}  # (mesh digest, count) -> Spectrum, the last few meshes of this process
+_IN_MEMORY_MESHES = 8
 
 
 def cotangent_laplacian(vertices, faces):
@@ -108,16 +115,28 @@ def _compute_spectrum(mesh: Mesh, count: int) -> Spectrum:
     return Spectrum(np.maximum(values[order], 0.0), vectors[:, order], mass, index, np.pi / mean_edge)
 
 
-def laplacian_spectrum(mesh: Mesh, count: int = 128, *, cache_dir=None, use_cache: bool = True) -> Spectrum:
-    """The ``count`` lowest eigenpairs of ``mesh``'s cotangent Laplacian, cached on disk.
+def keep_spectra_in(folder) -> None:
+    """Keep spectra under ``folder/spectra/`` from now on (console scripts; None: memory only)."""
+    global _spectra_dir
+    _spectra_dir = None if folder is None else Path(folder)
 
-    The cache file is ``<cache_dir>/spectra/<mesh digest>-<count>.npz``, written atomically;
-    an unreadable cache file is recomputed (with a warning) and replaced.
+
+def laplacian_spectrum(mesh: Mesh, count: int = 128, *, cache_dir=None) -> Spectrum:
+    """The ``count`` lowest eigenpairs of ``mesh``'s cotangent Laplacian.
+
+    Kept for the process (the last 8 meshes), and on disk where asked: in
+    ``<cache_dir>/spectra/<mesh digest>-<count>.npz`` (``cache_dir``, else the folder given to
+    :func:`keep_spectra_in`), written atomically; an unreadable cache file is recomputed (with a
+    warning) and replaced.
     """
     if count < 1:
         raise ValueError(f"count must be >= 1 eigenpairs; got {count}.")
-    path = Path(cache_dir or default_cache_dir()) / "spectra" / f"{mesh.digest()}-{count}.npz"
-    if use_cache and path.is_file():
+    key = (mesh.digest(), count)
+    folder = cache_dir if cache_dir is not None else _spectra_dir
+    path = None if folder is None else Path(folder) / "spectra" / f"{key[0]}-{count}.npz"
+    if path is None and key in _in_memory:
+        return _in_memory[key]
+    if path is not None and path.is_file():
         try:
             with np.load(path) as data:
                 return Spectrum(data["eigenvalues"], data["eigenvectors"], data["mass"], data["index"],
@@ -125,12 +144,16 @@ def laplacian_spectrum(mesh: Mesh, count: int = 128, *, cache_dir=None, use_cach
         except (OSError, ValueError, KeyError) as error:
             warnings.warn(f"{path}: unreadable spectrum cache ({error}); recomputing.", stacklevel=2)
     spectrum = _compute_spectrum(mesh, count)
-    if use_cache:
-        try:
-            _write_atomically(path, spectrum)
-        except OSError as error:  # a read-only home must not stop a render
-            warnings.warn(f"{path}: could not cache the spectrum ({error}); set JSSS_CACHE_DIR to a "
-                          "writable folder to keep it.", stacklevel=2)
+    if path is None:
+        if len(_in_memory) >= _IN_MEMORY_MESHES:
+            _in_memory.pop(next(iter(_in_memory)))
+        _in_memory[key] = spectrum
+        return spectrum
+    try:
+        _write_atomically(path, spectrum)
+    except OSError as error:  # a read-only cache folder must not stop a render
+        warnings.warn(f"{path}: could not cache the spectrum ({error}); set JSSS_CACHE_DIR to a "
+                      "writable folder to keep it.", stacklevel=2)
     return spectrum
 
 

@@ -21,12 +21,13 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-from ..incidence import incidence_law
+from ..diffusion.incidence import incidence_law
 from .image_space import (CameraBuffers, SampledProfile, camera_buffers, image_space_exitance, profile_radius,
                           rms_radius)
 from .lighting import irradiance, light_geometry, shadow_map
 from .mesh import weld
 from .normal_filter import laplacian_spectrum, smooth_normals, spectral_filter
+from .passes import Method
 from .raster import surface_attributes
 from .scene import Scene
 from .shading import specular_radiance, surface_radiance
@@ -90,7 +91,7 @@ def prepare_pixels(scene: Scene, method: str, profile: SampledProfile, *, normal
                    for light, m in zip(scene.lights, maps))
     timings["camera raster + shadows"] = time.perf_counter() - t0
     channel_lights = None
-    if method == "normal filtering":
+    if method == Method.NORMAL_FILTERING:
         t0 = time.perf_counter()
         filtered = filtered_normals(scene, profile, kind=normal_filter, eigenpairs=eigenpairs)
         raster, faces = buffers.raster, scene.mesh.faces
@@ -101,7 +102,7 @@ def prepare_pixels(scene: Scene, method: str, profile: SampledProfile, *, normal
         channel_lights = tuple(tuple(light_geometry(buffers.position, normals, buffers.mask, light, m)
                                      for light, m in zip(scene.lights, maps)) for normals in channel_normals)
         timings["normal filter"] = time.perf_counter() - t0
-    disc = profile_radius(profile) if method == "image-space" else 0.0
+    disc = profile_radius(profile) if method == Method.IMAGE_SPACE else 0.0
     return PixelPrepared(buffers, lights, channel_lights, disc)
 
 
@@ -112,15 +113,15 @@ def pixel_exitance(method: str, profile: SampledProfile, radiant, eta, prep: Pix
     Medium) point lights are read at its deposit depth."""
     dtype = radiant.dtype
     albedo = profile.albedo().astype(dtype)
-    if method == "normal filtering":
+    if method == Method.NORMAL_FILTERING:
         law = incidence_law(oblique) if oblique is not None else None  # one H solve for the three channels
         channels = [irradiance([g.astype(dtype) for g in lights], radiant, eta, law=law,
                                deposit=deposit)[..., c] for c, lights in enumerate(prep.channel_lights)]
         return albedo * jnp.stack(channels, -1)
     E = irradiance([g.astype(dtype) for g in prep.lights], radiant, eta, medium=oblique, deposit=deposit)
-    if method == "lambert":
+    if method == Method.LAMBERT:
         return albedo * E
-    if method == "image-space":
+    if method == Method.IMAGE_SPACE:
         return image_space_exitance(profile, E, prep.buffers, samples=samples, disc_radius=prep.disc_radius,
                                     seed=seed)
     raise ValueError(f"unknown pixel method {method!r}; one of lambert, normal filtering, image-space.")

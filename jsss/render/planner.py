@@ -31,11 +31,11 @@ accuracy target:
   light leaving (:func:`single_scattering_share`); it takes that share from the diffusion
   light rather than adding to it (the dipole already holds every order);
 * **oblique incidence** -- light arriving at a slant is deposited nearer the surface and more
-  of it returns (Chandrasekhar's H function, :mod:`jsss.incidence`); on for a homogeneous
+  of it returns (Chandrasekhar's H function, :mod:`jsss.diffusion.incidence`); on for a homogeneous
   medium where light arriving at 60 degrees returns at least a quarter of the target more
   than the profiles' normal beam (ketchup's red: +14 %; marble: +1 %);
 * **deposit depth** -- a point light's rays keep spreading below the surface, where light
-  scatters (half a reduced mean free path deep, :func:`jsss.incidence.deposit_depth`): on when
+  scatters (half a reduced mean free path deep, :func:`jsss.diffusion.incidence.deposit_depth`): on when
   reading the light there changes the irradiance under it by a quarter of the target
   (ketchup's lamp 35 mm above a 4 mm mean free path: 11 % in red);
 * **layered profile** -- only for layered materials; **specular** -- when the material has one.
@@ -50,14 +50,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..dipole import total_reflectance
+from ..diffusion.dipole import total_reflectance
 from ..fresnel import fresnel_transmittance
-from ..incidence import deposit_depth, incidence_ratio
-from ..single_scattering import single_scattering_albedo
+from ..diffusion.incidence import deposit_depth, incidence_ratio
+from ..diffusion.single_scattering import single_scattering_albedo
 from .calibration import (METHODS, FrameFeatures, choose_method, estimate_methods, knob_label, load_calibration,
                           parse_knob)
 from .lighting import light_geometry, shadow_map
 from .mesh import distance_to_surface, is_closed
+from .passes import Method, Pass
 from .profiles import choose_variances, full_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
@@ -65,9 +66,7 @@ from .texture_space import bake_texels, face_stretch, stretch_variation
 __all__ = ["PassDecision", "Plan", "frame_features", "plan_scene", "single_scattering_share"]
 
 STRETCH_THRESHOLD = 0.10
-PASS_ORDER = ("texture geometry", "irradiance", "shadows", "layered profile", "normal filtering",
-              "image-space integration", "diffusion", "stretch correction", "translucent shadow maps",
-              "single scattering", "oblique incidence", "deposit depth", "specular", "camera")
+PASS_ORDER = tuple(Pass)
 TEXTURE_KNOBS = (0.2, 0.05, 0.01)  # profile targets the calibration renders texture space with
 SAMPLE_KNOBS = (8, 32, 128)  # samples per pixel the calibration renders image space with
 
@@ -105,7 +104,7 @@ class Plan:
     taps: int
     max_ratio: float
     pixel_size: float
-    method: str = "texture-space"
+    method: Method = Method.TEXTURE_SPACE
     method_why: str = ""
     estimates: tuple = ()
     samples: int = 32
@@ -114,7 +113,7 @@ class Plan:
     knob: str = ""
     features: FrameFeatures | None = None
 
-    def on(self, name: str) -> bool:
+    def on(self, name: Pass) -> bool:
         for d in self.decisions:
             if d.name == name:
                 return d.on
@@ -137,12 +136,12 @@ class Plan:
                 head.append(f"  {mark} {e.method:<18} {e.knob:<12} {100 * e.error:7.2f}% {e.ms:9.3g}  {e.basis}")
         width = max(len(d.name) for d in self.decisions)
         lines = [f"  {'on ' if d.on else 'off'}  {d.name:<{width}}  {d.why}" for d in self.decisions]
-        if self.method == "texture-space":
+        if self.method == Method.TEXTURE_SPACE:
             knobs = (f"  knobs: {len(self.variances)} Gaussians (profile error {100 * self.profile_error:.2f} %), "
                      f"texture {self.texture_size}^2, {self.taps}-tap blur, steps grow variance <= {self.max_ratio:g}x")
-        elif self.method == "image-space":
+        elif self.method == Method.IMAGE_SPACE:
             knobs = f"  knobs: {self.samples} samples per pixel"
-        elif self.method == "normal filtering":
+        elif self.method == Method.NORMAL_FILTERING:
             knobs = f"  knobs: {self.normal_filter} filter"
         else:
             knobs = "  knobs: none"
@@ -202,7 +201,7 @@ def _profile_rms(material) -> float:
     return float(np.max(np.sqrt((2 * v[:, None] * w).sum(0) / np.maximum(w.sum(0), 1e-300))))
 
 
-def plan_scene(scene: Scene, *, accuracy: float | None = None, method: str | None = None,
+def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | str | None = None,
                samples: int | None = None, normal_filter: str = "spectral", calibration=None) -> Plan:
     """The plan for ``scene`` (its own accuracy target unless ``accuracy`` is given).
 
@@ -224,8 +223,11 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: str | Non
     target = scene.accuracy if accuracy is None else accuracy
     if not 0 < target < 1:
         raise ValueError(f"accuracy must lie in (0, 1) (a relative error); got {target}.")
-    if method is not None and method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}.")
+    if method is not None:
+        try:
+            method = Method(method)
+        except ValueError:
+            raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}.") from None
     if normal_filter not in ("spectral", "naive"):
         raise ValueError(f"normal_filter must be 'spectral' or 'naive'; got {normal_filter!r}.")
     if samples is not None and samples < 1:
@@ -241,7 +243,7 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: str | Non
         size *= 2
     size = min(size, scene.texture_size)
     pixels = scene.camera.width * scene.camera.height
-    work = {m: pixels for m in METHODS} | {"texture-space": size * size}
+    work = {m: pixels for m in METHODS} | {Method.TEXTURE_SPACE: size * size}
     estimates: tuple = ()
     if method is None:
         estimates = tuple(estimate_methods(load_calibration(calibration), features, work))
@@ -260,52 +262,52 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: str | Non
     if knob is None:
         knob = knob_label(method, samples=samples, normal_filter=normal_filter, target=texture_target)
 
-    decisions = {"irradiance": (True, f"{len(scene.lights)} light(s) with Fresnel transmittance"),
-                 "shadows": (True, "shadow map per light"),
-                 "camera": (True, "rasterize, look up, tone map")}
+    decisions = {Pass.IRRADIANCE: (True, f"{len(scene.lights)} light(s) with Fresnel transmittance"),
+                 Pass.SHADOWS: (True, "shadow map per light"),
+                 Pass.CAMERA: (True, "rasterize, look up, tone map")}
     gs, error, reached = choose_variances(material, texture_target / 2)
     variances, w = np.asarray(gs.variances), np.asarray(gs.weights)
     total = w.sum(0)
     if material.layers:
-        decisions["layered profile"] = (True, f"{len(material.layers)} layers"
+        decisions[Pass.LAYERED_PROFILE] = (True, f"{len(material.layers)} layers"
                                               + (" on a base" if material.base is not None else ""))
     else:
-        decisions["layered profile"] = (False, f"material is {material.kind}, not layered")
-    texture = method == "texture-space"
+        decisions[Pass.LAYERED_PROFILE] = (False, f"material is {material.kind}, not layered")
+    texture = method == Method.TEXTURE_SPACE
     diffusion = texture and rms >= pixel
     spread = f"profile RMS radius {rms:.3g} mm {'>=' if rms >= pixel else '<'} pixel footprint {pixel:.3g} mm"
     albedo = "/".join(f"{t:.3f}" for t in total)
-    decisions["diffusion"] = (diffusion, {
-        "texture-space": spread + ("" if diffusion else "; Lambert with the total albedo " + albedo),
-        "lambert": f"Lambert with the total albedo {albedo} ({spread})",
-        "normal filtering": "normal filtering stands in for it",
-        "image-space": "image-space integration stands in for it"}[method])
-    decisions["normal filtering"] = (method == "normal filtering", (
+    decisions[Pass.DIFFUSION] = (diffusion, {
+        Method.TEXTURE_SPACE: spread + ("" if diffusion else "; Lambert with the total albedo " + albedo),
+        Method.LAMBERT: f"Lambert with the total albedo {albedo} ({spread})",
+        Method.NORMAL_FILTERING: "normal filtering stands in for it",
+        Method.IMAGE_SPACE: "image-space integration stands in for it"}[method])
+    decisions[Pass.NORMAL_FILTERING] = (method == Method.NORMAL_FILTERING, (
         f"{normal_filter} filter of the normals per channel, gain = the profile's Hankel transform "
-        f"(falls to 1/2 near {1 / rms:.3g} rad/mm)") if method == "normal filtering" else f"method is {method}")
-    decisions["image-space integration"] = (method == "image-space", (
+        f"(falls to 1/2 near {1 / rms:.3g} rad/mm)") if method == Method.NORMAL_FILTERING else f"method is {method}")
+    decisions[Pass.IMAGE_SPACE_INTEGRATION] = (method == Method.IMAGE_SPACE, (
         f"{samples} samples per pixel drawn from the profile, 1/4 uniform on a disc, balance heuristic")
-        if method == "image-space" else f"method is {method}")
+        if method == Method.IMAGE_SPACE else f"method is {method}")
     if texture:
-        decisions["texture geometry"] = (True, "positions, normals and stretch per texel (once per mesh)")
+        decisions[Pass.TEXTURE_GEOMETRY] = (True, "positions, normals and stretch per texel (once per mesh)")
         variation = stretch_variation(scene.mesh)
         stretch = diffusion and variation >= STRETCH_THRESHOLD
-        decisions["stretch correction"] = (stretch, f"UV stretch varies by {100 * variation:.0f} % "
+        decisions[Pass.STRETCH_CORRECTION] = (stretch, f"UV stretch varies by {100 * variation:.0f} % "
                                                     f"({'>=' if variation >= STRETCH_THRESHOLD else '<'} "
                                                     f"{100 * STRETCH_THRESHOLD:.0f} %)"
                                            + ("" if diffusion else "; no diffusion to correct"))
-        decisions["translucent shadow maps"] = _tsm_decision(scene, variances, w, texture_target)
+        decisions[Pass.TRANSLUCENT_SHADOW_MAPS] = _tsm_decision(scene, variances, w, texture_target)
     else:
-        for name in ("texture geometry", "stretch correction", "translucent shadow maps"):
+        for name in (Pass.TEXTURE_GEOMETRY, Pass.STRETCH_CORRECTION, Pass.TRANSLUCENT_SHADOW_MAPS):
             decisions[name] = (False, f"texture space only; method is {method}")
-    decisions["single scattering"] = _single_scattering_decision(material, target)
-    decisions["oblique incidence"] = oblique_incidence_decision(material, target)
-    decisions["deposit depth"] = deposit_depth_decision(scene, target)
+    decisions[Pass.SINGLE_SCATTERING] = _single_scattering_decision(material, target)
+    decisions[Pass.OBLIQUE_INCIDENCE] = oblique_incidence_decision(material, target)
+    decisions[Pass.DEPOSIT_DEPTH] = deposit_depth_decision(scene, target)
     spec = material.specular > 0
-    decisions["specular"] = (spec, f"Beckmann m = {material.roughness:g}, weight {material.specular:g}"
+    decisions[Pass.SPECULAR] = (spec, f"Beckmann m = {material.roughness:g}, weight {material.specular:g}"
                              if spec else "material specular = 0")
     if not reached:
-        profile_pass = "layered profile" if material.layers else "diffusion"
+        profile_pass = Pass.LAYERED_PROFILE if material.layers else Pass.DIFFUSION
         on, why = decisions[profile_pass]
         decisions[profile_pass] = (on, why + " (target not reachable with 12 Gaussians; best shown)")
     ordered = tuple(PassDecision(name, *decisions[name]) for name in PASS_ORDER)
@@ -345,7 +347,7 @@ def _tsm_decision(scene: Scene, variances, weights, target):
 def single_scattering_share(medium) -> np.ndarray:
     """Single-scattered light over all the light leaving, per channel, under light along the normal.
 
-    Both per unit flux arriving: :func:`jsss.single_scattering.single_scattering_albedo` over
+    Both per unit flux arriving: :func:`jsss.diffusion.single_scattering.single_scattering_albedo` over
     the dipole's total times the entry transmittance.
     """
     single, diffusion = (np.asarray(a) for a in _single_and_diffuse(medium))
@@ -363,7 +365,7 @@ OBLIQUE_COSINE = 0.5  # light arriving 60 degrees from the normal: where the pla
 
 def oblique_incidence_decision(material, target):
     """On when light arriving at 60 degrees returns at least a quarter of the target more (or
-    less) than a normal beam, in some channel (:func:`jsss.incidence.incidence_ratio`)."""
+    less) than a normal beam, in some channel (:func:`jsss.diffusion.incidence.incidence_ratio`)."""
     if material.medium is None:
         return False, f"needs a homogeneous medium; material is {material.kind}"
     growth = np.asarray(incidence_ratio(material.medium, OBLIQUE_COSINE), float).reshape(-1) - 1
@@ -389,7 +391,7 @@ def deposit_change(scene):
 
 def deposit_depth_decision(scene, target):
     """On when a point light is near enough that reading it at the deposit depth changes its
-    irradiance under the lamp by a quarter of the target (:func:`jsss.incidence.deposit_depth`)."""
+    irradiance under the lamp by a quarter of the target (:func:`jsss.diffusion.incidence.deposit_depth`)."""
     material = scene.material
     if material.medium is None:
         return False, f"needs a homogeneous medium; material is {material.kind}"

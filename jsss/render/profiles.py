@@ -18,7 +18,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import dipole, transport
+from .. import transport
+from ..diffusion import dipole
 from .. import layers as _layers
 from ..gaussians import GaussianSum, empirical_dipole_fit, evaluate, layers_as_gaussians, to_gaussian_sum
 from ..numerics import is_concrete

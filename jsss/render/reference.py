@@ -99,7 +99,7 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
                        oblique: bool | None = None) -> ReferenceFrame:
     """The diffuse radiance of ``scene`` by brute-force surface integration (float64 if enabled).
 
-    ``oblique``: scale the irradiance by the oblique-incidence law (:mod:`jsss.incidence`);
+    ``oblique``: scale the irradiance by the oblique-incidence law (:mod:`jsss.diffusion.incidence`);
     default: where the planner would at the scene's accuracy, so that a frame is compared
     with the same physics it was planned to simulate.
     """

@@ -25,6 +25,7 @@ from .blur import blur_schedule, hierarchical_blur, uniform_stretch
 from .image_space import SampledProfile, camera_buffers
 from .lighting import irradiance, light_geometry, lookup, shadow_map, translucent_transmission
 from .mesh import is_closed
+from .passes import Method, Pass
 from .pixel_methods import PixelPrepared, pixel_radiance, prepare_pixels
 from .planner import Plan, plan_scene
 from .profiles import render_profile
@@ -48,7 +49,7 @@ class RenderParams(eqx.Module):
         homogeneous material, else the Gaussian sum above)
     medium : Medium or None, a homogeneous material's medium (for the single-scattering pass)
     oblique : Medium or None, the medium whose oblique-incidence law scales the irradiance
-        (:func:`jsss.incidence.incidence_ratio`), when the plan turns that pass on
+        (:func:`jsss.diffusion.incidence.incidence_ratio`), when the plan turns that pass on
     deposit : Medium or None, the medium whose deposit depth point lights are read at
         (:func:`jsss.render.lighting.depth_falloff`), when the plan turns that pass on
     """
@@ -84,8 +85,8 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
         profile = SampledProfile(medium=medium)
     else:
         profile = SampledProfile(weights=weights, variances=variances)
-    oblique = medium if medium is not None and plan.on("oblique incidence") else None
-    deposit = medium if medium is not None and plan.on("deposit depth") else None
+    oblique = medium if medium is not None and plan.on(Pass.OBLIQUE_INCIDENCE) else None
+    deposit = medium if medium is not None and plan.on(Pass.DEPOSIT_DEPTH) else None
     return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile, medium, oblique,
                         deposit)
 
@@ -125,7 +126,7 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
     pixel_lights = tuple(light_geometry(camera.position, normal, mask, light, m)
                          for light, m in zip(scene.lights, maps))
     timings["camera raster"] = time.perf_counter() - t0
-    if plan.on("stretch correction"):
+    if plan.on(Pass.STRETCH_CORRECTION):
         stretch = texels.stretch
     else:  # uniform: the median texel length everywhere
         stretch = np.where(texels.mask[..., None], texels.median_stretch(), 0.0)
@@ -134,7 +135,7 @@ def prepare(scene: Scene, plan: Plan, *, timings: dict | None = None) -> Prepare
     # map is traced).
     stretch = uniform_stretch(stretch, texels.mask)
     schedule = blur_schedule(np.asarray(plan.variances), texels.median_stretch(), max_ratio=plan.max_ratio) \
-        if plan.on("diffusion") else None
+        if plan.on(Pass.DIFFUSION) else None
     margin = 0
     if schedule is not None and not is_closed(scene.mesh):
         reach = 3.0 * np.sqrt(float(np.max(plan.variances))) / texels.median_stretch()
@@ -161,7 +162,7 @@ def diffusion_pass(params: RenderParams, prep: Prepared, plan: Plan, E):
     tracer's noise in red).
     """
     dtype = E.dtype
-    if not plan.on("diffusion"):
+    if not plan.on(Pass.DIFFUSION):
         return jnp.broadcast_to(E, (len(plan.variances),) + E.shape)
     mask, m = jnp.asarray(prep.texels.mask, dtype), prep.open_margin
     stretch = jax.tree.map(lambda a: jnp.asarray(a, dtype), prep.stretch)  # a (2,) pair, a map or a (u, v) tuple
@@ -182,7 +183,7 @@ def diffusion_pass(params: RenderParams, prep: Prepared, plan: Plan, E):
 
 def exitance_pass(params: RenderParams, prep: Prepared, plan: Plan, blurred):
     M = jnp.einsum("nc,nhwc->hwc", params.weights, blurred)
-    if plan.on("translucent shadow maps"):
+    if plan.on(Pass.TRANSLUCENT_SHADOW_MAPS):
         lights = [g.astype(blurred.dtype) for g in prep.texel_lights]
         M = M + translucent_transmission(blurred, params.weights, params.variances, lights,
                                          jnp.asarray(prep.texels.mask, blurred.dtype))
@@ -195,11 +196,11 @@ def camera_pass(params: RenderParams, prep: Prepared, plan: Plan, M, roughness: 
     exitance = lookup(M, prep.pixel_uv, prep.texels.mask)
     cos_view = jnp.asarray((prep.pixel_normal * prep.pixel_view).sum(-1), dtype)
     lights = [g.astype(dtype) for g in prep.pixel_lights]
-    single = plan.on("single scattering") and params.medium is not None
+    single = plan.on(Pass.SINGLE_SCATTERING) and params.medium is not None
     L = surface_radiance(exitance, cos_view, params.eta, medium=params.medium if single else None,
                          normals=jnp.asarray(prep.pixel_normal, dtype), view_dirs=jnp.asarray(prep.pixel_view, dtype),
                          light_geometry=lights, radiant=params.radiant, deposit=params.deposit)
-    if plan.on("specular"):
+    if plan.on(Pass.SPECULAR):
         L = L + specular_radiance(prep.pixel_normal, prep.pixel_view, lights, params.radiant,
                                   params.eta, roughness=roughness, weight=specular)
     return L * coverage[..., None]
@@ -247,7 +248,7 @@ def render(scene: Scene, plan: Plan | None = None, *, dtype=jnp.float32, time_pa
         plan = plan_scene(scene)
         timings["plan"] = time.perf_counter() - t0
     material = scene.material
-    if plan.method != "texture-space":
+    if plan.method != Method.TEXTURE_SPACE:
         return _render_pixels(scene, plan, dtype=dtype, timings=timings, time_passes=time_passes, repeats=repeats)
     prep = prepare(scene, plan, timings=timings)
     params = render_params(scene, plan, dtype=dtype)
@@ -275,9 +276,9 @@ def _render_pixels(scene: Scene, plan: Plan, *, dtype, timings: dict, time_passe
     material = scene.material
     frame = jax.jit(lambda p: pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples,
                                              oblique=p.oblique, deposit=p.deposit,
-                                             specular=plan.on("specular"), roughness=material.roughness,
+                                             specular=plan.on(Pass.SPECULAR), roughness=material.roughness,
                                              specular_weight=material.specular,
-                                             single_scattering=plan.on("single scattering"), medium=p.medium))
+                                             single_scattering=plan.on(Pass.SINGLE_SCATTERING), medium=p.medium))
     if time_passes:
         radiance, timings[f"{plan.method} frame"] = _timed(frame, params, repeats=repeats)
     else:

@@ -43,7 +43,7 @@ import numpy as np
 
 from .. import layers as _layers
 from .. import transport as _transport
-from ..gaussian_sum import GaussianSum
+from ..gaussians.gaussian_sum import GaussianSum
 from ..materials import jensen2001, jensen2001_names
 from ..medium import Medium
 from . import mesh as _mesh

@@ -29,8 +29,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..fresnel import exit_lobe, fresnel_reflectance
-from ..incidence import deposit_depth
-from ..single_scattering import single_scattering_albedo, single_scattering_brdf_from_cosines
+from ..diffusion.incidence import deposit_depth
+from ..diffusion.single_scattering import single_scattering_albedo, single_scattering_brdf_from_cosines
 from .lighting import depth_falloff
 
 __all__ = ["diffuse_radiance", "single_scattering", "specular_radiance", "surface_radiance", "tone_map"]
@@ -58,7 +58,7 @@ def single_scattering(medium, normals, view_dirs, light_geometry, radiant, *, de
               E_l = I_l\,c_l\cos\theta_l\,V_l / d_l^p,
 
     with the single-scattering BRDF :math:`f_r^{(1)}` and its hemispherical albedo
-    :math:`\rho^{(1)}` of :mod:`jsss.single_scattering` (HG with ``g = 0`` on the reduced
+    :math:`\rho^{(1)}` of :mod:`jsss.diffusion.single_scattering` (HG with ``g = 0`` on the reduced
     coefficients, the model the dipole's medium is given in). It leaves within a mean free
     path of where light entered, so both are evaluated at the pixel's own point.
 

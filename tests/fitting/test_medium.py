@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from jsss import Medium
-from jsss.hankel import hankel_grid
-from jsss.montecarlo import random_walk
+from jsss.layers.hankel import hankel_grid
+from jsss.transport.montecarlo import random_walk
 from fitting.medium import fit_medium
 
 

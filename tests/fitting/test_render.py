@@ -17,7 +17,7 @@ import pytest
 
 from fitting.render import RenderFitError, _texture_data, _texture_radiance, fit_render, fit_pixels
 from jsss import dipole
-from jsss.exr import write_exr
+from measure.exr import write_exr
 from jsss.medium import Medium
 from jsss.render import parse_scene, plan_scene, render
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from jsss import Medium
-from jsss.dipole import (
+from jsss.diffusion.dipole import (
     medium_from_reflectance,
     profile,
     reduced_albedo_from_reflectance,

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from jsss import Medium
-from jsss.dipole import medium_from_reflectance, profile, total_reflectance
+from jsss.diffusion.dipole import medium_from_reflectance, profile, total_reflectance
 from jsss.numerics import LowPrecisionWarning
 
 CASES = {

@@ -27,9 +27,9 @@ from jsss.gaussians import (
     to_gaussian_sum,
     total,
 )
-from jsss.layers import Layer, combine_spectra, skin_three_layer, stack
+from jsss.layers.kubelka_munk import Layer, combine_spectra, skin_three_layer, stack
 from jsss.materials import jensen2001, jensen2001_table
-from jsss.multipole import slab_totals
+from jsss.diffusion.multipole import slab_totals
 from tests.helpers import radial_integral
 
 A = GaussianSum(jnp.array([[0.3, 0.1], [0.2, 0.4]]), jnp.array([0.05, 1.5]))
@@ -104,7 +104,7 @@ def test_geometric_series_by_doubling_equals_the_term_by_term_sum(max_terms):
     """The series is built by doubling; the sum 1 + a + ... + a^M one product at a time,
     with products that fold into the top degree (support 30 of degree 40), is the truth.
     Eager (M from the tolerance, capped by max_terms) and under jit (M = max_terms)."""
-    from jsss.poly_gaussians import PolyGaussian
+    from jsss.gaussians.poly_gaussians import PolyGaussian
 
     a = random_poly(3, 40, 0.95, support=30)
     power = PolyGaussian(jnp.zeros_like(a.coefficients).at[0].set(1.0), a.base_variance)
@@ -120,7 +120,7 @@ def test_geometric_series_by_doubling_equals_the_term_by_term_sum(max_terms):
 
 def test_kubelka_munk_in_the_polynomial_basis_equals_frequency_space():
     """KM on exactly representable profiles: polynomial algebra = combine_spectra, to the tolerance."""
-    from jsss.poly_gaussians import _combine
+    from jsss.gaussians.poly_gaussians import _combine
 
     top = tuple(random_poly(s, 1000, f) for s, f in zip(range(4), (0.3, 0.6, 0.35, 0.6)))
     bottom = tuple(random_poly(s, 1000, f) for s, f in zip(range(4, 8), (0.5, 0.4, 0.45, 0.4)))

@@ -58,7 +58,7 @@ def test_bad_grids_are_rejected(kwargs):
 def test_a_grid_is_built_once_per_shape_and_dtype():
     """The Bessel moments take seconds: the same arguments give the same grid object; another
     size or dtype gives its own, in that dtype."""
-    from jsss.hankel import hankel_grid
+    from jsss.layers.hankel import hankel_grid
 
     assert hankel_grid(n=64) is hankel_grid(n=64)
     assert hankel_grid(n=64) is not hankel_grid(n=65)

@@ -7,8 +7,8 @@ import pytest
 
 from jsss import Medium
 from jsss import transport
-from jsss.incidence import h_function, incidence_ratio, index_matched_brdf, plane_albedo
-from jsss.montecarlo import random_walk
+from jsss.diffusion.incidence import h_function, incidence_ratio, index_matched_brdf, plane_albedo
+from jsss.transport.montecarlo import random_walk
 
 
 @pytest.mark.parametrize("albedo", [0.3, 0.75, 0.99, 0.999])
@@ -68,8 +68,8 @@ def test_incidence_ratio_is_one_at_normal_incidence_and_its_gradient_is_finite_a
 def test_index_matched_brdf_is_the_exit_angle_histogram_of_a_walk():
     """A walk of albedo 0.75 entering at cos 0.6: the light leaving per unit cosine is
     dR/dmu = 2 pi mu f_r(mu, mu0); binned in mu (8 bins), each within the walk's noise."""
-    from jsss.montecarlo import _params
-    from jsss.photon_walk import run_walk
+    from jsss.transport.montecarlo import _params
+    from jsss.transport.photon_walk import run_walk
 
     medium = Medium(0.25, 0.75, 1.0)
     params = _params([medium], [np.inf], g=0.0, eta_above=1.0, eta_below=1.0, relative=True)

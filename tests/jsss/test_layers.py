@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from jsss import Medium, dipole, hankel
-from jsss.layers import Layer, skin_three_layer, stack, stack_spectra
-from jsss.multipole import slab_totals, unscattered_transmittance
+from jsss.layers.kubelka_munk import Layer, skin_three_layer, stack, stack_spectra
+from jsss.diffusion.multipole import slab_totals, unscattered_transmittance
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import pytest
 from scipy import stats
 
 from jsss import Medium
-from jsss.montecarlo import random_walk, sample_henyey_greenstein
+from jsss.transport.montecarlo import random_walk, sample_henyey_greenstein
 
 iadpython = pytest.importorskip("iadpython")
 
@@ -82,8 +82,8 @@ def test_bad_arguments_are_rejected():
 def test_two_index_matched_halves_equal_one_slab():
     """Unlike diffusion theory, transport through two identical layers of d/2 is one slab of d:
     totals agree within 4 combined standard errors."""
-    from jsss.layers import Layer
-    from jsss.montecarlo import random_walk_layers
+    from jsss.layers.kubelka_munk import Layer
+    from jsss.transport.montecarlo import random_walk_layers
 
     medium = Medium(0.05, 1.2, 1.4)
     one = random_walk_layers([Layer(medium, 2.0)], n_photons=16384, seed=1)
@@ -95,8 +95,8 @@ def test_two_index_matched_halves_equal_one_slab():
 def test_non_absorbing_stack_with_index_steps_conserves_energy():
     """sigma_a = 0 in every layer, indices 1.3 / 1.5 / 1.33 over air: every photon is reflected,
     transmitted (scattered or not) or still walking."""
-    from jsss.layers import Layer
-    from jsss.montecarlo import random_walk_layers
+    from jsss.layers.kubelka_munk import Layer
+    from jsss.transport.montecarlo import random_walk_layers
 
     layers = [Layer(Medium(0.0, 2.0, 1.3), 0.5), Layer(Medium(0.0, 0.5, 1.5), 1.0), Layer(Medium(0.0, 1.0, 1.33), 0.7)]
     result = random_walk_layers(layers, n_photons=8192, seed=4)

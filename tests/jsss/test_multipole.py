@@ -7,7 +7,7 @@ import pytest
 
 from jsss import Medium, dipole, hankel
 from jsss.fresnel import internal_reflection_parameter
-from jsss.multipole import (
+from jsss.diffusion.multipole import (
     slab_geometry,
     slab_profiles,
     slab_spectra,

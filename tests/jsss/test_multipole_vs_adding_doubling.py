@@ -11,7 +11,7 @@ import pytest
 iadpython = pytest.importorskip("iadpython")
 
 from jsss import Medium  # noqa: E402
-from jsss.multipole import slab_totals  # noqa: E402
+from jsss.diffusion.multipole import slab_totals  # noqa: E402
 
 
 def adding_doubling_diffuse(albedo, optical_thickness, n):

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from jsss import Medium
-from jsss.montecarlo import random_walk
-from jsss.photon_walk import threefry_2x32, turn_cos_sin
+from jsss.transport.montecarlo import random_walk
+from jsss.transport.photon_walk import threefry_2x32, turn_cos_sin
 
 
 @pytest.mark.parametrize(
@@ -59,8 +59,8 @@ def test_result_does_not_depend_on_the_lane_count():
 def test_every_photon_is_recorded_once_and_none_is_cut_short():
     """At albedo 0.999 walks run to thousands of events; with no cap no photon is lost, and
     the reflectance plus the absorbed share (roulette) accounts for every photon."""
-    from jsss.montecarlo import _params
-    from jsss.photon_walk import run_walk
+    from jsss.transport.montecarlo import _params
+    from jsss.transport.photon_walk import run_walk
 
     medium = Medium(0.001, 0.999, 1.3)
     records = run_walk(_params([medium], [np.inf], g=0.0, eta_above=1 / 1.3, eta_below=1 / 1.3, relative=True),

@@ -8,7 +8,7 @@ from scipy import stats
 from scipy.integrate import quad
 
 from jsss import Medium, dipole
-from jsss.sampling import dipole_cdf, dipole_pdf, mis_integrate, sample_dipole_radius
+from jsss.diffusion.sampling import dipole_cdf, dipole_pdf, mis_integrate, sample_dipole_radius
 
 MEDIA = [Medium(0.01, 1.0, 1.3), Medium(0.5, 1.0, 1.0), Medium(0.0, 2.0, 1.5), Medium(0.002, 2.6, 1.5)]
 

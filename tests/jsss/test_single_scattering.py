@@ -7,10 +7,10 @@ import pytest
 from scipy.integrate import dblquad, quad
 
 from jsss import Medium
-from jsss.brdf import brdf
-from jsss.dipole import total_reflectance
-from jsss.montecarlo import random_walk
-from jsss.single_scattering import (henyey_greenstein, single_scattering, single_scattering_albedo,
+from jsss.diffusion.brdf import brdf
+from jsss.diffusion.dipole import total_reflectance
+from jsss.transport.montecarlo import random_walk
+from jsss.diffusion.single_scattering import (henyey_greenstein, single_scattering, single_scattering_albedo,
                                     single_scattering_brdf, single_scattering_brdf_from_cosines)
 
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from jsss import Medium, dipole, transport
-from jsss.montecarlo import _params, random_walk
-from jsss.photon_walk import run_walk
-from jsss.transport_table import TableGrid, tabulate
+from jsss.transport.montecarlo import _params, random_walk
+from jsss.transport.photon_walk import run_walk
+from jsss.transport.tables import TableGrid, tabulate
 
 iadpython = pytest.importorskip("iadpython")
 
@@ -277,7 +277,7 @@ def test_interpolation_is_exact_for_straight_lines_up_to_the_end_nodes():
     """The spline in eta, a' and r reproduces a linear function on every interval, the two
     end intervals included (with the end node repeated it did not: the end tangent was
     halved, and the total at eta 1.55 read 0.9 % low at albedo' 0.5)."""
-    from jsss.transport import _catmull_rom
+    from jsss.transport.profiles import _catmull_rom
 
     nodes = np.arange(7.0)
     position = jnp.linspace(0.0, 6.0, 121)

@@ -74,21 +74,34 @@ def test_spectrum_is_cached_on_disk_by_mesh_digest(tmp_path, monkeypatch):
     import jsss.render.normal_filter as nf
 
     mesh = uv_sphere(5.0, segments=16, rings=8)
-    first = laplacian_spectrum(mesh, 6)
+    first = laplacian_spectrum(mesh, 6, cache_dir=tmp_path)
     path = tmp_path / "spectra" / f"{mesh.digest()}-6.npz"
     assert path.is_file()
     monkeypatch.setattr(nf, "_compute_spectrum", lambda *a: pytest.fail("recomputed despite the cache"))
-    again = laplacian_spectrum(mesh, 6)
+    again = laplacian_spectrum(mesh, 6, cache_dir=tmp_path)
     assert np.array_equal(again.eigenvalues, first.eigenvalues)
     monkeypatch.undo()
-    monkeypatch.setenv("JSSS_CACHE_DIR", str(tmp_path))
     path.write_bytes(b"not a zip")
+    monkeypatch.setattr(nf, "_spectra_dir", tmp_path)  # what keep_spectra_in sets for the console scripts
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         recovered = laplacian_spectrum(mesh, 6)
     assert any("unreadable spectrum cache" in str(w.message) for w in caught)
     assert np.allclose(recovered.eigenvalues, first.eigenvalues)
     assert np.load(path)["eigenvalues"].shape == (6,)  # replaced with a good file
+
+
+def test_the_library_writes_no_spectrum_file_unless_asked(tmp_path, monkeypatch):
+    """Without cache_dir or keep_spectra_in, spectra stay in memory: no file under HOME, XDG or JSSS_CACHE_DIR."""
+    import jsss.render.normal_filter as nf
+
+    for name in ("HOME", "XDG_CACHE_HOME", "JSSS_CACHE_DIR"):
+        monkeypatch.setenv(name, str(tmp_path / name))
+    mesh = uv_sphere(4.0, segments=12, rings=6)
+    first = laplacian_spectrum(mesh, 5)
+    assert not any(tmp_path.rglob("*"))
+    monkeypatch.setattr(nf, "_compute_spectrum", lambda *a: pytest.fail("recomputed within the process"))
+    assert laplacian_spectrum(mesh, 5) is first
 
 
 def test_bad_arguments_are_named():

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from jsss import Medium
-from jsss.incidence import incidence_ratio
+from jsss.diffusion.incidence import incidence_ratio
 from jsss.render import load_scene, parse_scene, plan_scene, render
 
 
@@ -86,7 +86,7 @@ def test_parallel_light_is_not_read_deeper():
 def test_irradiance_takes_a_solved_law_in_place_of_the_medium_and_not_both():
     """Normal filtering lights a frame once per channel's normals with one solved law: the
     same irradiance as solving it from the medium, to the last bit; both at once is refused."""
-    from jsss.incidence import incidence_law
+    from jsss.diffusion.incidence import incidence_law
     from jsss.render.lighting import LightGeometry, irradiance
 
     cosine = np.linspace(0.05, 1.0, 12)

@@ -91,7 +91,7 @@ def test_command_line_renders_png_and_exr_and_prints_the_plan(tmp_path):
     assert "plan:" in out.stdout and "diffusion" in out.stdout and "timings (ms)" in out.stdout
     import matplotlib.image
 
-    from jsss.exr import read_exr
+    from measure.exr import read_exr
 
     png = matplotlib.image.imread(tmp_path / "out.png")
     assert png.shape[:2] == (30, 40)

@@ -2,7 +2,7 @@ r"""Closed-form Gaussian fits of dipoles and multipoles (after d'Eon et al. 2007
 
 Every dipole and multipole is a signed sum of pole terms
 :math:`z\,P(r; \sigma_{tr}, |z|)` with :math:`P = (1 + \sigma_{tr} d) e^{-\sigma_{tr} d}/d^3`,
-:math:`d = \sqrt{r^2 + z^2}` (:func:`jsss.dipole.pole_profile`). Writing :math:`r = |z|\rho`
+:math:`d = \sqrt{r^2 + z^2}` (:func:`jsss.diffusion.dipole.pole_profile`). Writing :math:`r = |z|\rho`
 shows that the shape of a pole depends on :math:`x = \sigma_{tr}|z|` alone:
 :math:`P(r) = |z|^{-3} \tilde P(\rho; x)`. So a fit with variances fixed relative to
 
@@ -29,12 +29,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._pole_weight_table import TABLE_U, TABLE_WEIGHTS
+from ..data.pole_weight_table import TABLE_U, TABLE_WEIGHTS
 from .gaussian_sum import GaussianSum
-from .medium import Medium
-from .multipole import choose_n_dipoles, slab_geometry
-from .numerics import as_float_array, is_concrete
-from .dipole import source_depths
+from ..medium import Medium
+from ..diffusion.multipole import choose_n_dipoles, slab_geometry
+from ..numerics import as_float_array, is_concrete
+from ..diffusion.dipole import source_depths
 
 __all__ = [
     "VARIANCE_RATIOS",
@@ -130,7 +130,7 @@ def empirical_dipole_fit(medium: Medium) -> GaussianSum:
     r"""The closed-form 8-Gaussian fit of the dipole profile, per channel.
 
     Four Gaussians per pole (real and virtual source) with weights from the derived
-    :math:`C_i` curves; the total equals :func:`jsss.dipole.total_reflectance` exactly.
+    :math:`C_i` curves; the total equals :func:`jsss.diffusion.dipole.total_reflectance` exactly.
 
     Parameters
     ----------
@@ -158,7 +158,7 @@ def empirical_multipole_fit(medium: Medium, thickness, *, eta_top=None, eta_bott
                             n_dipoles: int | None = None, tol: float = 1e-6):
     r"""Closed-form Gaussian fits of a slab's :math:`R(r)` and :math:`T(r)` (a sum of poles).
 
-    Uses the same image train as :func:`jsss.multipole.slab_profiles` (first-collision
+    Uses the same image train as :func:`jsss.diffusion.multipole.slab_profiles` (first-collision
     source), 4 Gaussians per pole: ``8 (2 n + 1)`` Gaussians per channel for each profile.
 
     Returns

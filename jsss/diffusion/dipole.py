@@ -30,9 +30,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .fresnel import exit_lobe, internal_reflection_parameter
-from .medium import Medium
-from .numerics import (
+from ..fresnel import exit_lobe, internal_reflection_parameter
+from ..medium import Medium
+from ..numerics import (
     append_axes,
     as_float_array,
     is_concrete,

@@ -8,7 +8,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from jsss import Medium, export
+from jsss import Medium
+from measure import export
 from jsss.materials import jensen2001
 from jsss.render.scene import medium_scene_toml, parse_scene
 

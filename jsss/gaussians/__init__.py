@@ -1,8 +1,8 @@
 """Sums of Gaussians: representation, algebra, closed-form fits and the polynomial basis.
 
-Public face of :mod:`jsss.gaussian_sum` (the :class:`GaussianSum` type and its algebra),
-:mod:`jsss.pole_fit` (the empirical dipole/multipole fits, after d'Eon 2007 App. A) and
-:mod:`jsss.poly_gaussians` (polynomial-of-Gaussians arithmetic and Kubelka-Munk layers).
+Public face of :mod:`jsss.gaussians.gaussian_sum` (the :class:`GaussianSum` type and its algebra),
+:mod:`jsss.gaussians.pole_fit` (the empirical dipole/multipole fits, after d'Eon 2007 App. A) and
+:mod:`jsss.gaussians.poly_gaussians` (polynomial-of-Gaussians arithmetic and Kubelka-Munk layers).
 Iterative least-squares fits live in :mod:`fitting`.
 """
 

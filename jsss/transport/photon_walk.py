@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .fresnel import fresnel_reflectance
+from ..fresnel import fresnel_reflectance
 
 __all__ = ["WalkRecords", "run_walk", "sample_henyey_greenstein", "turn_cos_sin"]
 
@@ -300,7 +300,7 @@ def run_walk(params, *, n_photons: int, lanes: int = 4096, max_steps: int = 2000
     """Walk ``n_photons`` photons through the stack described by ``params``; one record each.
 
     ``params`` = (sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below), per layer
-    arrays of one dtype (see :mod:`jsss.montecarlo`), optionally followed by the cosine at which
+    arrays of one dtype (see :mod:`jsss.transport.montecarlo`), optionally followed by the cosine at which
     photons start inside (an oblique beam after refraction; default 1, along the normal). A
     photon still inside after ``max_steps`` events or ``max_path`` [mm] of path is recorded as
     lost (side 0). Progress

@@ -24,8 +24,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .dipole import profile, source_depths, total_reflectance
-from .medium import Medium
-from .numerics import append_axes, as_float_array
+from ..medium import Medium
+from ..numerics import append_axes, as_float_array
 
 __all__ = ["dipole_cdf", "dipole_pdf", "mis_integrate", "sample_dipole_radius"]
 

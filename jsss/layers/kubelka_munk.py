@@ -12,11 +12,11 @@ on top of slab 2 (``+`` travelling down, ``-`` up), with all orders of inter-sla
     R_{12}^- = R_2^- + \frac{T_2^- R_1^- T_2^+}{1 - R_1^- R_2^+}.
 
 Each slab's :math:`\hat R^\pm(k), \hat T^\pm(k)` come in closed form from
-:func:`jsss.multipole.slab_spectra` (all image poles summed exactly); the light that
-crosses a slab unscattered (:func:`jsss.multipole.unscattered_transmittance`) is a
+:func:`jsss.diffusion.multipole.slab_spectra` (all image poles summed exactly); the light that
+crosses a slab unscattered (:func:`jsss.diffusion.multipole.unscattered_transmittance`) is a
 :math:`\delta` at ``r = 0``, a constant in ``k``, and is carried in :math:`T`. A
 semi-infinite base is the multipole's limit, the dipole. The only numerical transform is
-the inverse one back to ``r`` (:mod:`jsss.hankel`).
+the inverse one back to ``r`` (:mod:`jsss.layers.hankel`).
 
 Indices: each layer's ``medium.eta`` is its absolute index (air = 1). A boundary's
 relative index is the ratio of the indices on its two sides.
@@ -32,10 +32,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import hankel
-from .dipole import spectrum as dipole_spectrum
-from .medium import Medium
-from .multipole import slab_spectra, unscattered_transmittance
-from .numerics import as_float_array, is_concrete
+from ..diffusion.dipole import spectrum as dipole_spectrum
+from ..medium import Medium
+from ..diffusion.multipole import slab_spectra, unscattered_transmittance
+from ..numerics import as_float_array, is_concrete
 
 __all__ = [
     "Layer",
@@ -193,7 +193,7 @@ def stack(layers: Sequence[Layer], base: Medium | None = None, *, r=None, grid: 
         transform grid; values below ``grid.r[0]`` take the first node's). Default: the
         grid's radii.
     grid : HankelGrid, optional, keyword-only
-        Radii and frequencies (default :func:`jsss.hankel.hankel_grid` with its defaults,
+        Radii and frequencies (default :func:`jsss.layers.hankel.hankel_grid` with its defaults,
         which takes about a second to build: make one and pass it for repeated calls).
     eta_above, eta_below : float, keyword-only
         Absolute indices of the surroundings.

@@ -87,7 +87,7 @@ def reusable_program(*, static_argnames=()):
     (atomically). Its compilation then comes from XLA's cache like any other.
 
     The key also holds the versions of jax, jaxlib, equinox, lineax and optimistix, the
-    backend, the float64 flag and a hash of the sources of jsss, fitting and measure, so a stored program
+    backend, the float64 flag and a hash of the sources of jsss, fitting and the function's own package, so a stored program
     is never run by code other than the one that traced it. That is also why the export's
     compatibility checks on LAPACK custom calls are off: a program is only ever loaded by the
     exact jaxlib that wrote it. A file that fails to load is traced again and replaced.
@@ -106,7 +106,8 @@ def reusable_program(*, static_argnames=()):
                 return function(*args, **kwargs, **static)
             leaves = [jax.numpy.asarray(leaf) for leaf in leaves]
             signature = repr((function.__module__, function.__qualname__, sorted(static.items()), str(treedef),
-                              [(leaf.shape, leaf.dtype.name, leaf.weak_type) for leaf in leaves], _fingerprint()))
+                              [(leaf.shape, leaf.dtype.name, leaf.weak_type) for leaf in leaves],
+                              _fingerprint(function.__module__.split(".")[0])))
             key = hashlib.sha256(signature.encode()).hexdigest()[:32]
             program = _loaded.get(key) or _load_or_trace(function, static, treedef, leaves, key)
             return program.call(*leaves)
@@ -151,9 +152,15 @@ def _write_atomically(path: Path, data: bytes) -> None:
         warnings.warn(f"{path}: cannot keep the traced program there ({error})", stacklevel=3)
 
 
-@functools.lru_cache(maxsize=1)
-def _fingerprint() -> str:
-    """Versions, backend, float64 flag and a hash of the sources whose tracing is stored."""
+# The packages below this one (and this one): the sources a program traced from here can run.
+_BELOW = ("jsss", "fitting")
+
+
+@functools.lru_cache(maxsize=None)
+def _fingerprint(package: str) -> str:
+    """Versions, backend, float64 flag and a hash of the sources whose tracing is stored: the
+    packages this module stands on, and the package of the decorated function (``package``,
+    which may sit above: ``measure.synth`` keeps programs too)."""
     import jax
 
     versions = []
@@ -164,21 +171,21 @@ def _fingerprint() -> str:
             versions.append(f"{name}=?")
     digest = hashlib.sha256()
     root = Path(__file__).resolve().parent.parent
-    for package in ("jsss", "fitting", "measure"):
-        for source in sorted((root / package).rglob("*.py")):
+    for name in dict.fromkeys(_BELOW + (package,)):
+        for source in sorted((root / name).rglob("*.py")):
             digest.update(source.relative_to(root).as_posix().encode())
             digest.update(source.read_bytes())
     return f"{' '.join(versions)} {jax.default_backend()} x64={jax.config.jax_enable_x64} {digest.hexdigest()}"
 
 
 def stored_hankel_grid(**options):
-    """:func:`jsss.hankel.hankel_grid` with these options, read from disk where a console script
+    """:func:`jsss.layers.hankel.hankel_grid` with these options, read from disk where a console script
     turned the cache on and an earlier run stored it (``jsss-grids/``); built and stored
-    otherwise. Without the cache it is :func:`jsss.hankel.hankel_grid` itself."""
+    otherwise. Without the cache it is :func:`jsss.layers.hankel.hankel_grid` itself."""
     import jax.numpy as jnp
     import numpy as np
 
-    from . import hankel
+    from jsss.layers import hankel
 
     if _program_dir is None:
         return hankel.hankel_grid(**options)

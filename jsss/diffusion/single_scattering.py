@@ -18,9 +18,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .fresnel import fresnel_transmittance, refracted_cosine
-from .medium import Medium
-from .numerics import append_axes, as_float_array, is_concrete, safe_sqrt
+from ..fresnel import fresnel_transmittance, refracted_cosine
+from ..medium import Medium
+from ..numerics import append_axes, as_float_array, is_concrete, safe_sqrt
 
 __all__ = [
     "henyey_greenstein",

@@ -13,7 +13,7 @@ and :math:`z_{b,bottom} = 2 A_{bottom} D` below is modelled by a real source at 
     T(r) = \frac{w\alpha'}{4\pi}\sum_i \left[\phi(d - z_{r,i}, r) - \phi(d - z_{v,i}, r)\right],
 
 with the pole term :math:`\phi(z, r) = z (1 + \sigma_{tr} d_z) e^{-\sigma_{tr} d_z} / d_z^3`,
-:math:`d_z = \sqrt{r^2 + z^2}` (:func:`jsss.dipole.pole_profile`).
+:math:`d_z = \sqrt{r^2 + z^2}` (:func:`jsss.diffusion.dipole.pole_profile`).
 
 **Closed forms.** Each pole has the exact Hankel transform
 :math:`2\pi\int_0^\infty \phi(z, r) J_0(kr)\,r\,dr / 4\pi = \mathrm{sign}(z)\,e^{-|z|\beta}/2` with
@@ -53,9 +53,9 @@ import numpy as np
 from jax import lax
 
 from .dipole import pole_profile
-from .fresnel import internal_reflection_parameter
-from .medium import Medium
-from .numerics import append_axes, as_float_array, is_concrete, safe_sqrt
+from ..fresnel import internal_reflection_parameter
+from ..medium import Medium
+from ..numerics import append_axes, as_float_array, is_concrete, safe_sqrt
 
 __all__ = [
     "SlabGeometry",

@@ -13,7 +13,7 @@ radius; between layers a transmitted photon refracts (Snell) into the next layer
 weight 1e-4, Russian roulette keeps one photon in ten at ten times the weight (unbiased). A
 photon still inside after ``max_steps`` events is counted as lost.
 
-The walk itself is :mod:`jsss.photon_walk`: lanes that finish take the next photon, so no
+The walk itself is :mod:`jsss.transport.photon_walk`: lanes that finish take the next photon, so no
 lane waits for the longest walk, and a seed reproduces a run bit for bit whatever the lane
 count (``batch_size``).
 """
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-from .medium import Medium
+from ..medium import Medium
 from .photon_walk import run_walk, sample_henyey_greenstein
 
 __all__ = ["MonteCarloResult", "random_walk", "random_walk_layers", "sample_henyey_greenstein"]

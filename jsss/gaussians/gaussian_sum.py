@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .numerics import append_axes, as_float_array, is_concrete
+from ..numerics import append_axes, as_float_array, is_concrete
 
 __all__ = [
     "GaussianSum",

@@ -12,9 +12,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from .dipole import total_reflectance
-from .fresnel import fresnel_transmittance
-from .medium import Medium
-from .numerics import append_axes, as_float_array
+from ..fresnel import fresnel_transmittance
+from ..medium import Medium
+from ..numerics import append_axes, as_float_array
 from .single_scattering import single_scattering_brdf
 
 __all__ = ["brdf", "diffuse_brdf"]

@@ -9,7 +9,7 @@ under a tolerance (d'Eon eq. 13). Coefficients of degree above ``N`` are folded 
 degree ``N`` so that no energy is lost by truncation.
 
 Slab profiles enter the basis from the closed-form pole fits
-(:mod:`jsss.pole_fit`) through :func:`jsss.gaussian_sum.reduce_to`, which splits each
+(:mod:`jsss.gaussians.pole_fit`) through :func:`jsss.gaussians.gaussian_sum.reduce_to`, which splits each
 Gaussian between its two nearest basis variances keeping its total and second moment.
 """
 
@@ -23,10 +23,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .gaussian_sum import GaussianSum, reduce_to
-from .medium import Medium
-from .layers import layer_boundaries, relative_to
-from .multipole import unscattered_transmittance
-from .numerics import as_float_array, is_concrete
+from ..medium import Medium
+from ..layers.kubelka_munk import layer_boundaries, relative_to
+from ..diffusion.multipole import unscattered_transmittance
+from ..numerics import as_float_array, is_concrete
 from .pole_fit import empirical_dipole_fit, empirical_multipole_fit
 
 __all__ = [

@@ -38,8 +38,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .medium import Medium
-from .numerics import as_float_array, safe_sqrt
+from ..medium import Medium
+from ..numerics import as_float_array, safe_sqrt
 
 __all__ = ["deposit_depth", "h_function", "incidence_law", "incidence_ratio", "index_matched_brdf", "plane_albedo"]
 

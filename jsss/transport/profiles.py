@@ -2,14 +2,14 @@ r"""Profiles exact to radiative transfer, from scaled Monte Carlo tables.
 
 For a semi-infinite homogeneous medium of relative index ``eta`` and Henyey-Greenstein
 ``g`` under a normally incident pencil beam, the exitance profile per unit *entering* flux
-(as :func:`jsss.dipole.profile`) is
+(as :func:`jsss.diffusion.dipole.profile`) is
 
 .. math::
 
     R(r) = \sigma_s'^2\, T\!\left(r\sigma_s',\ \sigma_a/\sigma_s'\right),
 
 exactly: :math:`T` is the Laplace transform of one absorption-free random walk's exit
-path lengths (see :mod:`jsss.transport_table`; lengths scale with :math:`1/\sigma_s'` and
+path lengths (see :mod:`jsss.transport.tables`; lengths scale with :math:`1/\sigma_s'` and
 absorption weights each path by :math:`e^{-\sigma_a L}`). The tables shipped in
 ``jsss/data/transport_tables.npz`` hold :math:`T` for eta 1.0-1.6 (step 0.1) and
 g in {0, 0.5, 0.8, 0.9}; ``eta`` is interpolated (Catmull-Rom), ``g`` must be one of the
@@ -35,9 +35,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .fresnel import fresnel_reflectance
-from .medium import Medium
-from .numerics import append_axes, as_float_array, is_concrete
+from ..fresnel import fresnel_reflectance
+from ..medium import Medium
+from ..numerics import append_axes, as_float_array, is_concrete
 
 __all__ = ["FixedSlice", "check_medium", "check_supported", "entry_transmittance", "fixed_slice", "profile", "radiance",
            "slice_values", "table_info", "total_reflectance"]

@@ -8,7 +8,7 @@ import sys
 
 SCRIPT = """
 import os, sys, warnings, jax
-from jsss.cache import enable_compilation_cache
+from fitting.programs import enable_compilation_cache
 where = enable_compilation_cache()
 print(where, jax.config.jax_compilation_cache_dir)
 os.environ["JAX_COMPILATION_CACHE_DIR"] = sys.argv[1] + "/jax"
@@ -47,7 +47,8 @@ import jax.numpy as jnp
 import numpy as np
 
 jax.config.update("jax_enable_x64", True)
-from jsss import cache, hankel
+from fitting import programs as cache
+from jsss.layers import hankel
 
 traces = []
 
