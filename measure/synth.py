@@ -24,11 +24,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fitting.medium import observable
 from jsss import transport
 from jsss.diffusion import dipole
 from jsss.layers import hankel
 from fitting.programs import reusable_program
+from jsss.beam import observable
 from jsss.medium import Medium
 
 from .exr import write_exr
@@ -66,7 +66,7 @@ def _observed(medium: Medium, radii_mm: np.ndarray, beam_sigma_mm: float, grid=N
 @reusable_program(static_argnames=("model", "g", "view_cos"))
 @partial(jax.jit, static_argnames=("model", "g", "view_cos"))
 def _beam_convolved(medium, grid, beam_sigma_mm, radii_mm, *, model, g, view_cos):
-    # The fit's own forward model (fitting.medium.observable), so the two cannot drift apart:
+    # The fit's own forward model (jsss.beam.observable), so the two cannot drift apart:
     # a spectrum for the dipole, a profile on the transform grid for transport.
     values, _ = observable(model, g, view_cos, medium, grid.k, grid.r)
     spectrum = values.reshape(grid.k.shape[0], -1)

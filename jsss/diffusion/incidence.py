@@ -41,7 +41,8 @@ import numpy as np
 from ..medium import Medium
 from ..numerics import as_float_array, safe_sqrt
 
-__all__ = ["deposit_depth", "h_function", "incidence_law", "incidence_ratio", "index_matched_brdf", "plane_albedo"]
+__all__ = ["deposit_depth", "h_function", "incidence_law", "incidence_ratio", "index_matched_brdf", "plane_albedo",
+           "point_light_loss"]
 
 NODES = 48          # Gauss-Legendre nodes on [0, 1]
 ITERATIONS = 400    # the 1/H form converges geometrically; at albedo 1 it is slowest (1e-9 by 300)
@@ -165,4 +166,14 @@ def deposit_depth(medium: Medium):
     scattered red (albedo' 0.75) follows the same rule as the single-scattered green and blue.
     """
     return 1.0 / (2.0 * (medium.sigma_a + medium.sigma_s_prime) * medium.eta)
+
+def point_light_loss(distance, depth):
+    r"""Share of a point light's irradiance that is lost between the surface and ``depth`` below
+    it, on the axis under the lamp ``distance`` away: :math:`1 - (d / (d + z))^2` (inverse square
+    law read at the apparent depth; both in mm). 0 for parallel light (``distance`` infinite)."""
+    distance = jnp.asarray(distance)
+    far = jnp.isinf(distance)
+    safe = jnp.where(far, 1.0, distance)
+    return jnp.where(far, 0.0, 1 - (safe / (safe + depth)) ** 2)
+
 

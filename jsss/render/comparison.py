@@ -18,7 +18,7 @@ import numpy as np
 
 from .calibration import CalibrationRow
 from .mesh import is_closed
-from .passes import Method
+from .passes import Method, Pass
 from .planner import SAMPLE_KNOBS, TEXTURE_KNOBS, plan_scene
 from .reference import ReferenceFrame, reference_radiance
 from .renderer import render

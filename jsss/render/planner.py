@@ -46,14 +46,10 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from ..diffusion.dipole import total_reflectance
-from ..fresnel import fresnel_transmittance
-from ..diffusion.incidence import deposit_depth, incidence_ratio
-from ..diffusion.single_scattering import single_scattering_albedo
+from ..diffusion.incidence import deposit_depth, incidence_ratio, point_light_loss
+from ..diffusion.single_scattering import single_scattering_share
 from .calibration import (METHODS, FrameFeatures, choose_method, estimate_methods, knob_label, load_calibration,
                           parse_knob)
 from .lighting import light_geometry, shadow_map
@@ -63,7 +59,7 @@ from .profiles import choose_variances, full_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
 
-__all__ = ["PassDecision", "Plan", "frame_features", "plan_scene", "single_scattering_share"]
+__all__ = ["PassDecision", "Plan", "frame_features", "plan_scene"]
 
 STRETCH_THRESHOLD = 0.10
 PASS_ORDER = tuple(Pass)
@@ -344,22 +340,6 @@ def _tsm_decision(scene: Scene, variances, weights, target):
                 f"({'>=' if on else '<'} {0.1 * target:.2g})")
 
 
-def single_scattering_share(medium) -> np.ndarray:
-    """Single-scattered light over all the light leaving, per channel, under light along the normal.
-
-    Both per unit flux arriving: :func:`jsss.diffusion.single_scattering.single_scattering_albedo` over
-    the dipole's total times the entry transmittance.
-    """
-    single, diffusion = (np.asarray(a) for a in _single_and_diffuse(medium))
-    return single / np.maximum(diffusion, 1e-300)
-
-
-@jax.jit  # one program (op by op it was 0.9 s of planning a render)
-def _single_and_diffuse(medium):
-    return (single_scattering_albedo(medium, jnp.asarray(1.0)),
-            total_reflectance(medium) * fresnel_transmittance(jnp.asarray(1.0), medium.eta))
-
-
 OBLIQUE_COSINE = 0.5  # light arriving 60 degrees from the normal: where the planner weighs the effect
 
 
@@ -386,7 +366,7 @@ def deposit_change(scene):
         return 0.0, np.inf, 0.0
     depth = float(np.max(np.asarray(deposit_depth(material.medium), float)))
     nearest = min(distance_to_surface(scene.mesh, light.position) for light in points)
-    return 1 - (nearest / (nearest + depth)) ** 2, nearest, depth
+    return float(point_light_loss(nearest, depth)), nearest, depth
 
 
 def deposit_depth_decision(scene, target):
