@@ -11,10 +11,11 @@ been issued, moves the survivors into fewer lanes (fewer wasted steps while the 
 walks drain).
 
 Random numbers are counter-based: event ``k`` of photon ``i`` draws its four uniforms from
-two Threefry-2x32 blocks keyed by the seed with counters ``(i, 2k)`` and ``(i, 2k + 1)``
-(the generator behind ``jax.random``, checked against Random123's answers). A photon's path therefore depends only on the seed and
-its index, not on the lane count or the order in which lanes finish: a seed reproduces a
-run bit for bit whatever ``lanes`` is.
+two Threefry-2x32-20 blocks keyed by the seed with counters ``(i, 2k)`` and ``(i, 2k + 1)``:
+``jax.extend.random.threefry_2x32``, the generator behind ``jax.random`` (its known answers
+from Random123 are tested), applied to our own counters: no key splitting per event. A
+photon's path therefore depends only on the seed and its index, not on the lane count or
+the order in which lanes finish: a seed reproduces a run bit for bit whatever ``lanes`` is.
 
 The physics (per event): free path :math:`s = -\ln(1-u)/\sigma_t` in the photon's layer;
 if the boundary is nearer, the photon moves to it and is reflected with the exact Fresnel
@@ -34,6 +35,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.extend.random import threefry_2x32
 
 from ..fresnel import fresnel_reflectance
 
@@ -146,28 +148,16 @@ def _start_cosine(params):
     return params[8] if len(params) > 8 else 1.0
 
 
-_ROTATIONS = (13, 15, 26, 6, 17, 29, 16, 24)
+def _event_words(key, photon, steps):
+    """The four random uint32 words of event ``steps`` of ``photon``: (path, turn, phi, roulette).
 
-
-def threefry_2x32(key, counter):
-    """Threefry-2x32 with 20 rounds (Salmon et al. 2011, Random123): 64 random bits per counter.
-
-    ``key`` and ``counter`` are pairs of uint32 arrays (broadcastable). Written out here so a
-    photon's numbers come from one block per pair of words, keyed by (photon, event), with no
-    key splitting per event.
+    Threefry-2x32-20 blocks with counters ``(photon, 2 steps)`` and ``(photon, 2 steps + 1)``,
+    keyed by ``key`` (a pair of uint32). ``threefry_2x32`` hashes the first half of its count
+    with the second half, so its words come out as x0, x0', x1, x1'.
     """
-    k0, k1 = (jnp.asarray(k, jnp.uint32) for k in key)
-    ks = (k0, k1, k0 ^ k1 ^ jnp.uint32(0x1BD11BDA))
-    x0 = jnp.asarray(counter[0], jnp.uint32) + k0
-    x1 = jnp.asarray(counter[1], jnp.uint32) + k1
-    for group in range(5):
-        for r in _ROTATIONS[4 * (group % 2): 4 * (group % 2) + 4]:
-            x0 = x0 + x1
-            x1 = (x1 << jnp.uint32(r)) | (x1 >> jnp.uint32(32 - r))
-            x1 = x1 ^ x0
-        x0 = x0 + ks[(group + 1) % 3]
-        x1 = x1 + ks[(group + 2) % 3] + jnp.uint32(group + 1)
-    return x0, x1
+    photon, event = jnp.asarray(photon).astype(jnp.uint32), 2 * jnp.asarray(steps).astype(jnp.uint32)
+    x0, x0_next, x1, x1_next = threefry_2x32(key, jnp.stack([photon, photon, event, event + 1]))
+    return jnp.stack([x0, x1, x0_next, x1_next])
 
 
 def _at_layer(values, layer):
@@ -191,12 +181,11 @@ def _event(lane: _Lane, key, params) -> _Lane:
     n_layers = sigma_t.shape[0]
     layer = lane.layer
     dtype = lane.z.dtype
-    photon, event = lane.photon.astype(jnp.uint32), 2 * lane.steps.astype(jnp.uint32)
-    bits = jnp.stack(threefry_2x32(key, (photon, event)) + threefry_2x32(key, (photon, event + 1)))
     # Uniforms in (0, 1) from 32 bits: a free path is cut at -ln(2^-33) = 23 mean free paths
     # (probability e^-23), far below any tally's noise. A boundary hit uses u_turn for
     # Fresnel; a collision uses it for the scattering angle (the two never meet in one event).
-    u_path, u_turn, u_phi, u_roulette = (bits.astype(dtype) + 0.5) * (2.0**-32)
+    words = _event_words(key, lane.photon, lane.steps)
+    u_path, u_turn, u_phi, u_roulette = (words.astype(dtype) + 0.5) * (2.0**-32)
     u_fresnel = u_theta = u_turn
     s = -jnp.log(u_path) / _at_layer(sigma_t, layer)
     dz = lane.uz
@@ -335,7 +324,7 @@ def run_walk(params, *, n_photons: int, lanes: int = 4096, max_steps: int = 2000
         # Every photon issued: move the survivors into fewer lanes so the drain costs less.
         if issued >= n_photons and width >= 64 and active <= width // 8:
             order = jnp.argsort(state.photon >= n_photons, stable=True)[: width // 4]
-            state = jax.tree.map(lambda x: x[order], state)
+            state = jax.tree.map(lambda x, rows=order: x[rows], state)
     if shown:
         print(file=sys.stderr)
     records = np.concatenate(chunks)

@@ -1,33 +1,79 @@
 """The refilled-lane walk engine: its generator, its independence from scheduling, its records."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from jsss import Medium
 from jsss.transport.montecarlo import random_walk
-from jsss.transport.photon_walk import threefry_2x32, turn_cos_sin
+from jsss.transport.photon_walk import _event_words, turn_cos_sin
+
+_MASK = 0xFFFFFFFF
 
 
-@pytest.mark.parametrize(
-    "key, counter, expected",
-    [((0, 0), (0, 0), (0x6B200159, 0x99BA4EFE)),
-     ((0xFFFFFFFF, 0xFFFFFFFF), (0xFFFFFFFF, 0xFFFFFFFF), (0x1CB996FC, 0xBB002BE7)),
-     ((0x13198A2E, 0x03707344), (0x243F6A88, 0x85A308D3), (0xC4923A9C, 0x483DF7A0))],
-)
-def test_threefry_matches_random123_known_answers(key, counter, expected):
-    """Known-answer vectors of Threefry-2x32-20 from Random123's kat_vectors."""
-    out = threefry_2x32(tuple(jnp.uint32(k) for k in key), tuple(jnp.uint32(c) for c in counter))
-    assert tuple(int(v) for v in out) == expected
+def _threefry_reference(key, counter):
+    """Threefry-2x32-20 (Salmon et al. 2011) in plain Python integers: the test's own truth."""
+    ks = (key[0], key[1], key[0] ^ key[1] ^ 0x1BD11BDA)
+    x0, x1 = (counter[0] + ks[0]) & _MASK, (counter[1] + ks[1]) & _MASK
+    rotations = (13, 15, 26, 6, 17, 29, 16, 24)
+    for group in range(5):
+        for r in rotations[4 * (group % 2): 4 * (group % 2) + 4]:
+            x0 = (x0 + x1) & _MASK
+            x1 = (((x1 << r) | (x1 >> (32 - r))) & _MASK) ^ x0
+        x0 = (x0 + ks[(group + 1) % 3]) & _MASK
+        x1 = (x1 + ks[(group + 2) % 3] + group + 1) & _MASK
+    return x0, x1
 
 
-def test_threefry_bits_are_uniform():
-    """Chi-square of the top 4 bits over 2^16 counters: uniform within p > 1e-3."""
+_KNOWN_ANSWERS = [((0, 0), (0, 0), (0x6B200159, 0x99BA4EFE)),
+                  ((0xFFFFFFFF, 0xFFFFFFFF), (0xFFFFFFFF, 0xFFFFFFFF), (0x1CB996FC, 0xBB002BE7)),
+                  ((0x13198A2E, 0x03707344), (0x243F6A88, 0x85A308D3), (0xC4923A9C, 0x483DF7A0))]
+
+
+@pytest.mark.parametrize("key, counter, expected", _KNOWN_ANSWERS)
+def test_reference_threefry_matches_random123_known_answers(key, counter, expected):
+    """Known-answer vectors of Threefry-2x32-20 from Random123's kat_vectors: the reference
+    the walk's words are checked against below is itself right."""
+    assert _threefry_reference(key, counter) == expected
+
+
+@pytest.mark.parametrize("key, counter, expected", _KNOWN_ANSWERS[1:])
+def test_event_words_are_random123_blocks_at_the_events_counters(key, counter, expected):
+    """Event k of photon i draws (x0, x1) of the block at counter (i, 2k), then (x0, x1) of
+    (i, 2k + 1): the first two words are Random123's known answers (an odd counter is the
+    second block of event (c - 1) / 2), all four equal the reference."""
+    photon, word = counter
+    steps, first = word // 2, word % 2 == 0
+    words = [int(w) for w in _event_words(tuple(jnp.uint32(k) for k in key), jnp.int64(photon), jnp.int64(steps))]
+    assert tuple(words[:2] if first else words[2:]) == expected
+    assert tuple(words) == (_threefry_reference(key, (photon, 2 * steps))
+                            + _threefry_reference(key, (photon, 2 * steps + 1)))
+
+
+def test_event_words_match_the_reference_under_vmap():
+    """The walk calls the generator per lane under ``vmap``: the same words as the reference,
+    photon by photon, for a key with both halves set."""
+    rng = np.random.default_rng(5)
+    key = (0x9E3779B9, 0x7F4A7C15)
+    photons = rng.integers(0, 2**31 - 1, 64)
+    steps = rng.integers(0, 10**6, 64)
+    words = jax.vmap(_event_words, in_axes=(None, 0, 0))(tuple(jnp.uint32(k) for k in key),
+                                                         jnp.asarray(photons, jnp.int32), jnp.asarray(steps, jnp.int32))
+    expected = [_threefry_reference(key, (int(i), 2 * int(k))) + _threefry_reference(key, (int(i), 2 * int(k) + 1))
+                for i, k in zip(photons, steps)]
+    assert np.array_equal(np.asarray(words), np.array(expected, dtype=np.uint32))
+
+
+def test_event_words_are_uniform():
+    """Chi-square of the top 4 bits of each of the four words over 2^14 photons: uniform
+    within p > 1e-3."""
     from scipy import stats
 
-    x0, x1 = threefry_2x32((jnp.uint32(7), jnp.uint32(0)), (jnp.arange(2**16, dtype=jnp.uint32), jnp.uint32(3)))
-    for word in (x0, x1):
-        counts = np.bincount(np.asarray(word) >> 28, minlength=16)
+    words = jax.vmap(_event_words, in_axes=(None, 0, None))((jnp.uint32(7), jnp.uint32(0)),
+                                                            jnp.arange(2**14, dtype=jnp.int32), jnp.int32(3))
+    for word in np.asarray(words).T:
+        counts = np.bincount(word >> 28, minlength=16)
         assert stats.chisquare(counts).pvalue > 1e-3
 
 
