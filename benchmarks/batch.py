@@ -68,7 +68,7 @@ def main(argv=None):
                 out = os.path.join(folder, f"table{workers}{state}.csv")
                 before = resource.getrusage(resource.RUSAGE_CHILDREN)
                 t0 = time.perf_counter()
-                run = subprocess.run([sys.executable, "-m", "measure.cli", "batch", "--manifest",
+                run = subprocess.run([sys.executable, "-m", "measure.commands.fit_params", "batch", "--manifest",
                                       os.path.join(folder, "manifest.csv"), "--out", out, "--workers", str(workers)],
                                      capture_output=True, text=True, stdin=subprocess.DEVNULL, env=env)
                 seconds = time.perf_counter() - t0

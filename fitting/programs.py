@@ -1,21 +1,13 @@
-"""Where jsss keeps things on disk, and the persistent XLA compilation cache of the console scripts.
+"""Traced programs kept across processes: :func:`reusable_program` and :func:`stored_hankel_grid`.
 
-Compiling a fit or a render takes 10-20 s on a CPU and is the same work every time a command
-starts; JAX can keep the compiled programs on disk. Library code never changes JAX's global
-configuration: only the console scripts (``fit-params``, its batch workers, ``jsss-render``)
-call :func:`enable_compilation_cache`, before their first computation.
-
-Where: ``$JAX_COMPILATION_CACHE_DIR`` if set (JAX's own variable), else ``xla/`` in the jsss
-cache directory (``$JSSS_CACHE_DIR``, else ``$XDG_CACHE_HOME/jsss``, else ``~/.cache/jsss``).
-Set ``JSSS_COMPILATION_CACHE=0`` to turn it off.
-
-XLA's cache keeps compiled programs but not JAX's *tracing* of the Python that makes them,
-which for a fit (optimistix's solvers under ``vmap``) takes 4-6 s of every start. Functions
-decorated with :func:`reusable_program` are therefore also kept traced, as serialized
-``jax.export`` programs under ``jsss-programs/`` in the same directory, when (and only when)
-a console script has turned the cache on. See :func:`reusable_program` for the key. The
-Hankel grid of the fits (3 s of Bessel functions to build, 0.05 s to read) is kept there too,
-under ``jsss-grids/`` (:func:`stored_hankel_grid`).
+XLA's persistent cache keeps compiled programs but not JAX's *tracing* of the Python that
+makes them, which for a fit (optimistix's solvers under ``vmap``) takes 4-6 s of every start.
+Functions decorated with :func:`reusable_program` are therefore kept traced, as serialized
+``jax.export`` programs under ``jsss-programs/``, and the Hankel grid of the fits (3 s of
+Bessel functions to build, 0.05 s to read) under ``jsss-grids/`` (:func:`stored_hankel_grid`),
+in the folder given to :func:`keep_programs_in`. Library code writes nothing of its own
+accord: until a caller names a folder (the console commands do, see
+:mod:`measure.commands`), programs are traced and grids built as usual, in memory.
 """
 
 from __future__ import annotations
@@ -29,57 +21,27 @@ import tempfile
 import warnings
 from pathlib import Path
 
-__all__ = ["compilation_cache_dir", "default_cache_dir", "enable_compilation_cache", "reusable_program",
-           "stored_hankel_grid"]
+__all__ = ["keep_programs_in", "reusable_program", "stored_hankel_grid"]
 
-# Where reusable_program keeps traced programs; None (library default) traces as usual.
-_program_dir: Path | None = None
-
-
-def default_cache_dir() -> Path:
-    """``$JSSS_CACHE_DIR``, else ``$XDG_CACHE_HOME/jsss``, else ``~/.cache/jsss``."""
-    if os.environ.get("JSSS_CACHE_DIR"):
-        return Path(os.environ["JSSS_CACHE_DIR"])
-    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "jsss"
+# The folder given to keep_programs_in; None (library default) traces and builds as usual.
+_folder: Path | None = None
 
 
-def compilation_cache_dir() -> Path | None:
-    """The directory the console scripts keep compiled programs in, or None when turned off."""
-    if os.environ.get("JSSS_COMPILATION_CACHE", "1") == "0":
-        return None
-    if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
-        return Path(os.environ["JAX_COMPILATION_CACHE_DIR"])
-    return default_cache_dir() / "xla"
+def keep_programs_in(folder) -> None:
+    """Keep traced programs under ``folder/jsss-programs/`` and Hankel grids under
+    ``folder/jsss-grids/`` from now on (console commands; None: in memory only, the default).
 
-
-def enable_compilation_cache() -> Path | None:
-    """Turn on JAX's persistent cache at :func:`compilation_cache_dir` (console scripts only).
-
-    Programs that took over half a second to compile are kept. An unwritable directory gives
-    a warning and no cache (the command still runs). Returns the directory, or None.
+    The folders are made when the first file is written; one that cannot be written costs a
+    trace per start and a warning, nothing else.
     """
-    import jax
-
-    path = compilation_cache_dir()
-    if path is None:
-        return None
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        warnings.warn(f"{path}: cannot keep compiled programs there ({error}); set JAX_COMPILATION_CACHE_DIR "
-                      "or JSSS_CACHE_DIR to a writable directory", stacklevel=2)
-        return None
-    jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    global _program_dir
-    _program_dir = path / "jsss-programs"  # JAX's cache reads only its own *-cache files there
-    return path
+    global _folder
+    _folder = None if folder is None else Path(folder)
 
 
 def reusable_program(*, static_argnames=()):
     """Decorate a jitted function so console scripts reuse its tracing across processes.
 
-    Library behaviour is unchanged: until :func:`enable_compilation_cache` has run, or when
+    Library behaviour is unchanged: until :func:`keep_programs_in` has named a folder, or when
     any argument is a tracer (the call is inside ``jit``, ``vmap`` or ``grad``), the function
     is called as it is. Otherwise the call's arrays are flattened, and the program for their
     shapes and dtypes, the pytree structure and the static arguments (``static_argnames``,
@@ -98,7 +60,7 @@ def reusable_program(*, static_argnames=()):
         def wrapper(*args, **kwargs):
             import jax
 
-            if _program_dir is None:
+            if _folder is None:
                 return function(*args, **kwargs)
             static = {name: kwargs.pop(name) for name in static_argnames if name in kwargs}
             leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
@@ -124,7 +86,7 @@ def _load_or_trace(function, static, treedef, leaves, key):
     import jax
     from jax import export
 
-    path = _program_dir / f"{function.__name__}-{key}.jaxexport"
+    path = _folder / "jsss-programs" / f"{function.__name__}-{key}.jaxexport"
     try:
         program = export.deserialize(bytearray(path.read_bytes()))
     except Exception:  # missing, truncated or from an incompatible writer: trace again
@@ -179,22 +141,22 @@ def _fingerprint(package: str) -> str:
 
 
 def stored_hankel_grid(**options):
-    """:func:`jsss.layers.hankel.hankel_grid` with these options, read from disk where a console script
-    turned the cache on and an earlier run stored it (``jsss-grids/``); built and stored
-    otherwise. Without the cache it is :func:`jsss.layers.hankel.hankel_grid` itself."""
+    """:func:`jsss.layers.hankel.hankel_grid` with these options, read from ``jsss-grids/`` in the
+    folder given to :func:`keep_programs_in` where an earlier run stored it; built and stored
+    otherwise. Without such a folder it is :func:`jsss.layers.hankel.hankel_grid` itself."""
     import jax.numpy as jnp
     import numpy as np
 
     from jsss.layers import hankel
 
-    if _program_dir is None:
+    if _folder is None:
         return hankel.hankel_grid(**options)
     dtype = np.dtype(options.pop("dtype", None) or jnp.result_type(float))
     # The grid is hankel.py's NumPy/SciPy arithmetic: keyed on that file and those versions only.
     source = hashlib.sha256(Path(hankel.__file__).read_bytes()).hexdigest()
     signature = repr((sorted(options.items()), dtype.name, source, np.__version__,
                       importlib.metadata.version("scipy")))
-    path = _program_dir.parent / "jsss-grids" / f"hankel-{hashlib.sha256(signature.encode()).hexdigest()[:32]}.npz"
+    path = _folder / "jsss-grids" / f"hankel-{hashlib.sha256(signature.encode()).hexdigest()[:32]}.npz"
     fields = ("r", "k", "forward_matrix", "inverse_matrix")
     try:
         with np.load(path) as stored:

@@ -1,6 +1,6 @@
 """The measurement pipeline: images -> calibrated radial profile -> fitted medium.
 
-Pure array code (no file access): :mod:`measure.cli` reads the files and calls
+Pure array code (no file access): :mod:`measure.files` reads the files and calls
 :func:`fit_measurement`.
 """
 

@@ -1,42 +1,12 @@
-"""The console scripts' persistent compilation cache: where it goes, and that it can be turned off.
+"""The store of traced programs and Hankel grids (fitting.programs): off by default, kept in the
+folder a caller names, traced once across processes.
 
-Run in a subprocess: turning the cache on changes JAX's global configuration, which the test
-process itself must keep as it is (library code never changes it)."""
+Run in subprocesses: the store is process state, which the test process must keep as it is
+(library code never turns it on). Where the commands put it is tested with them
+(tests/measure/test_commands.py)."""
 
 import subprocess
 import sys
-
-SCRIPT = """
-import os, sys, warnings, jax
-from fitting.programs import enable_compilation_cache
-where = enable_compilation_cache()
-print(where, jax.config.jax_compilation_cache_dir)
-os.environ["JAX_COMPILATION_CACHE_DIR"] = sys.argv[1] + "/jax"
-print(enable_compilation_cache())
-os.environ["JSSS_COMPILATION_CACHE"] = "0"
-print(enable_compilation_cache())
-del os.environ["JSSS_COMPILATION_CACHE"]
-os.environ["JAX_COMPILATION_CACHE_DIR"] = sys.argv[1] + "/a_file/xla"
-with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always")
-    print(enable_compilation_cache(), len(caught), str(caught[0].message).split(":")[0] if caught else "")
-"""
-
-
-def test_cache_directory_follows_the_environment_and_an_unwritable_one_warns(tmp_path):
-    (tmp_path / "a_file").write_text("not a directory")
-    env = {"PATH": "", "HOME": str(tmp_path), "JSSS_CACHE_DIR": str(tmp_path / "jsss")}
-    out = subprocess.run([sys.executable, "-c", SCRIPT, str(tmp_path)], capture_output=True, text=True, env=env,
-                         timeout=120)
-    assert out.returncode == 0, out.stderr
-    lines = out.stdout.splitlines()
-    assert lines[0] == f"{tmp_path}/jsss/xla {tmp_path}/jsss/xla"  # JSSS_CACHE_DIR/xla, and JAX uses it
-    assert lines[1] == f"{tmp_path}/jax"  # JAX's own variable wins
-    assert lines[2] == "None"  # JSSS_COMPILATION_CACHE=0 turns it off
-    assert lines[3] == f"None 1 {tmp_path}/a_file/xla"  # unwritable: one warning naming it, no cache
-    assert (tmp_path / "jsss" / "xla").is_dir()
-
-
 
 PROGRAM_SCRIPT = """
 import sys
@@ -61,7 +31,7 @@ def solve(matrix, scale, *, power):
 
 
 if sys.argv[2] == "on":
-    cache.enable_compilation_cache()
+    cache.keep_programs_in(sys.argv[1] + "/jsss/xla")
 matrix = jnp.arange(9.0).reshape(3, 3) / 7
 value = solve(matrix, 2.0, power=2)
 other_static = solve(matrix, 2.0, power=3)
@@ -77,7 +47,7 @@ print(traced, np.asarray(value).tobytes().hex(), np.asarray(other_static).tobyte
 
 
 def _run_program_script(tmp_path, mode):
-    env = {"PATH": "", "HOME": str(tmp_path), "JSSS_CACHE_DIR": str(tmp_path / "jsss")}
+    env = {"PATH": "", "HOME": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", PROGRAM_SCRIPT, str(tmp_path), mode], capture_output=True, text=True,
                          env=env, timeout=300)
     assert out.returncode == 0, out.stderr
@@ -86,6 +56,8 @@ def _run_program_script(tmp_path, mode):
 
 
 def test_a_reusable_program_is_traced_once_across_processes_and_a_damaged_file_is_traced_again(tmp_path):
+    """Off, nothing is written and the function traces as usual; with keep_programs_in, a second
+    process traces nothing and gets the same bits; a truncated file is traced again."""
     programs = tmp_path / "jsss" / "xla" / "jsss-programs"
     # Off (the library default): the function itself, traced once per static value; nothing written.
     traced, plain = _run_program_script(tmp_path, "off")

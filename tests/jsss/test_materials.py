@@ -28,34 +28,3 @@ def test_unknown_name_lists_the_valid_ones():
         jensen2001("jade")
     message = str(info.value)
     assert "'jade'" in message and all(name in message for name in jensen2001_names())
-
-
-def test_console_script_prints_every_material(capsys):
-    """The interim `jsss` command prints one line per material with both columns."""
-    from jsss.cli import main
-
-    assert main([]) == 0
-    out = capsys.readouterr().out
-    assert all(name in out for name in jensen2001_names())
-    assert "0.1264" in out  # Chicken1 blue, the one channel off by more than 0.01
-
-
-def test_info_reports_versions_caches_precision_and_devices(monkeypatch, tmp_path):
-    """`jsss info` names what a bug report needs, with the cache directories the environment sets."""
-    import jax
-
-    from jsss.cli import info_lines
-
-    monkeypatch.setenv("JSSS_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(tmp_path / "xla"))
-    info = dict(line.split(": ", 1) for line in info_lines())
-    assert info["jax"] == jax.__version__
-    for key in ("jsss", "numpy", "OpenEXR", "devices"):
-        assert info[key] and info[key] != "not installed"
-    assert info["float64 (jax_enable_x64)"].startswith("on")  # the test suite enables it
-    assert info["jsss cache (JSSS_CACHE_DIR)"] == str(tmp_path / "cache")
-    assert info["compilation cache of the commands (JAX_COMPILATION_CACHE_DIR)"] == str(tmp_path / "xla")
-    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR")
-    info = dict(line.split(": ", 1) for line in info_lines())
-    assert info["compilation cache of the commands (JAX_COMPILATION_CACHE_DIR)"] == str(tmp_path / "cache" / "xla")
-    assert "cpu" in info["devices"]

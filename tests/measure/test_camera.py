@@ -145,8 +145,9 @@ def test_command_line_view_angle_and_exitance(walk_image, tmp_path):
     ref = write_exr(tmp_path / "r.exr", image.reference, ("Y",), attributes={"jsss_pixel_mm": 0.05})
 
     def run(*args):
-        return subprocess.run([sys.executable, "-m", "measure.cli", str(meas), "--reference", str(ref), "--eta", "1.3",
-                               *args], capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=600)
+        return subprocess.run([sys.executable, "-m", "measure.commands.fit_params", str(meas), "--reference", str(ref),
+                               "--eta", "1.3", *args], capture_output=True, text=True, stdin=subprocess.DEVNULL,
+                              timeout=600)
 
     bad = run("--view-angle", "nan")
     assert bad.returncode == 2 and "--view-angle must lie in [0, 90) degrees" in bad.stderr
@@ -163,9 +164,9 @@ def test_dipole_warns_where_its_bias_exceeds_its_stated_error(walk_image, tmp_pa
     _, image = walk_image
     meas = write_exr(tmp_path / "m.exr", image.measurement, ("Y",), attributes={"jsss_pixel_mm": 0.05})
     ref = write_exr(tmp_path / "r.exr", image.reference, ("Y",), attributes={"jsss_pixel_mm": 0.05})
-    out = subprocess.run([sys.executable, "-m", "measure.cli", str(meas), "--reference", str(ref), "--eta", "1.3",
-                          "--model", "dipole", "--json"], capture_output=True, text=True, stdin=subprocess.DEVNULL,
-                         timeout=600)
+    out = subprocess.run([sys.executable, "-m", "measure.commands.fit_params", str(meas), "--reference", str(ref),
+                          "--eta", "1.3", "--model", "dipole", "--json"], capture_output=True, text=True,
+                         stdin=subprocess.DEVNULL, timeout=600)
     assert out.returncode == 0, out.stderr
     table = json.loads(out.stdout)
     assert table["dipole_minus_transport"]["sigma_a"][0] > 0.5

@@ -15,8 +15,8 @@ from measure.synth import synthesize, write_measurement
 
 
 def run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "measure.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, timeout=600, stdin=subprocess.DEVNULL)
+    return subprocess.run([sys.executable, "-m", "measure.commands.fit_params", *map(str, args)], capture_output=True,
+                          text=True, cwd=cwd, timeout=600, stdin=subprocess.DEVNULL)
 
 
 @pytest.fixture(scope="module")

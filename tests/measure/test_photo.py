@@ -118,8 +118,8 @@ def test_corrupt_or_unsupported_files_give_one_line_errors(tmp_path, name, conte
 
 
 def _fit(*args):
-    out = subprocess.run([sys.executable, "-m", "measure.cli", *map(str, args)], capture_output=True, text=True,
-                         timeout=600, stdin=subprocess.DEVNULL)
+    out = subprocess.run([sys.executable, "-m", "measure.commands.fit_params", *map(str, args)], capture_output=True,
+                         text=True, timeout=600, stdin=subprocess.DEVNULL)
     assert out.returncode == 0, out.stderr
     return json.loads(out.stdout)
 

@@ -77,7 +77,7 @@ def test_obj_with_uvs_loads_and_without_uvs_is_refused(tmp_path):
 
 def _run(*args, cwd):
     env = dict(os.environ, CI="true")
-    return subprocess.run([sys.executable, "-m", "jsss.render.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "measure.commands.render", *args], capture_output=True, text=True,
                           cwd=cwd, env=env, stdin=subprocess.DEVNULL, timeout=600)
 
 
@@ -136,22 +136,3 @@ def test_command_line_renders_several_scenes_and_reports_the_bad_one(tmp_path):
     assert sorted(p.name for p in (tmp_path / "renders").iterdir()) == ["a.png", "b.png"]
     errors = [line for line in out.stderr.splitlines() if "error" in line]
     assert len(errors) == 1 and "bad.toml: [scene] materail: unknown section" in errors[0]
-
-
-def test_every_command_has_a_version_and_plain_help():
-    """--version on jsss-render, fit-params and fit-params batch; help text without reST markup
-    (before: ``jsss-render``: in the description), and every batch option explained."""
-    import jsss
-
-    for module, extra in (("jsss.render.cli", []), ("measure.cli", []), ("measure.cli", ["batch"]), ("jsss.cli", [])):
-        out = subprocess.run([sys.executable, "-m", module, *extra, "--version"], capture_output=True, text=True,
-                             stdin=subprocess.DEVNULL, timeout=120)
-        assert out.returncode == 0 and jsss.__version__ in out.stdout, (module, extra, out.stderr)
-        help_text = subprocess.run([sys.executable, "-m", module, *extra, "--help"], capture_output=True, text=True,
-                                   stdin=subprocess.DEVNULL, timeout=120).stdout
-        assert "``" not in help_text and ":math:" not in help_text, (module, extra)
-        lines = help_text.splitlines() + [""]
-        # An option's help follows its name after two spaces, or on the next, indented line.
-        bare = [line for line, after in zip(lines, lines[1:]) if line.startswith("  -")
-                and "  " not in line.strip() and not after.startswith(" " * 10)]
-        assert not bare, (module, extra, bare)

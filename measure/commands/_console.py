@@ -1,0 +1,233 @@
+"""What every console command shares: JAX's setup and the caches, progress, exit status 2, the
+version string, atomic writes, and subcommands beside a default command.
+
+Library code below the commands prints nothing, changes no global configuration and writes no
+file unless asked. A command asks here, before its first computation (:func:`start`):
+
+* float64 (``jax_enable_x64``): fits and the planner's profile fits need it;
+* XLA's persistent compilation cache in :func:`compilation_cache_dir`, and in the same folder
+  the fits' traced programs and Hankel grids (:func:`fitting.programs.keep_programs_in`), so
+  that a second start neither compiles nor traces again;
+* for commands that render, the Laplacian spectra of the meshes in ``spectra/`` of
+  :func:`cache_dir` (:func:`jsss.render.normal_filter.keep_spectra_in`).
+
+Bad input (a :class:`UsageError`, or any ``ValueError``/``OSError`` of the library, whose
+messages name the file, the key or the argument) ends a command with one line on stderr and
+exit status 2, never a traceback (:func:`exit_status`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import os
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+__all__ = ["Progress", "UsageError", "add_commands", "cache_dir", "compilation_cache_dir", "enable_caches",
+           "error_line", "exit_status", "fit_grid", "start", "version", "write_atomically", "write_text"]
+
+
+class UsageError(ValueError):
+    """A problem with the command line or the input files, reported in one line (exit status 2)."""
+
+
+def version(prog: str) -> str:
+    """``PROG (jsss) VERSION``, from the installed metadata: importing jsss (and JAX) for
+    ``--version`` or ``--help`` took 2-6 s."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as installed
+
+    try:
+        return f"{prog} (jsss) {installed('jsss')}"
+    except PackageNotFoundError:  # a source tree that was not installed
+        return f"{prog} (jsss) unknown"
+
+
+# ----------------------------------------------------------------------------- JAX and the caches
+def cache_dir() -> Path:
+    """``$JSSS_CACHE_DIR``, else ``$XDG_CACHE_HOME/jsss``, else ``~/.cache/jsss``."""
+    if os.environ.get("JSSS_CACHE_DIR"):
+        return Path(os.environ["JSSS_CACHE_DIR"])
+    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "jsss"
+
+
+def compilation_cache_dir() -> Path | None:
+    """Where the commands keep compiled (and traced) programs: ``$JAX_COMPILATION_CACHE_DIR`` if
+    set (JAX's own variable), else ``xla/`` in :func:`cache_dir`; None where
+    ``JSSS_COMPILATION_CACHE=0`` turns it off."""
+    if os.environ.get("JSSS_COMPILATION_CACHE", "1") == "0":
+        return None
+    if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+        return Path(os.environ["JAX_COMPILATION_CACHE_DIR"])
+    return cache_dir() / "xla"
+
+
+def enable_caches(*, spectra: bool = False) -> Path | None:
+    """Turn on JAX's persistent compilation cache and the store of traced programs at
+    :func:`compilation_cache_dir`, and with ``spectra`` keep the renderer's Laplacian spectra in
+    :func:`cache_dir` (importing the renderer costs 0.3 s, so commands that do not render leave
+    it off).
+
+    Programs that took over half a second to compile are kept. An unwritable folder gives a
+    warning and no cache (the command still runs). Returns the folder, or None.
+    """
+    import jax
+
+    from fitting.programs import keep_programs_in
+
+    if spectra:
+        from jsss.render.normal_filter import keep_spectra_in
+
+        keep_spectra_in(cache_dir())
+    path = compilation_cache_dir()
+    if path is None:
+        return None
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        warnings.warn(f"{path}: cannot keep compiled programs there ({error}); set JAX_COMPILATION_CACHE_DIR "
+                      "or JSSS_CACHE_DIR to a writable directory", stacklevel=2)
+        return None
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    keep_programs_in(path)  # JAX's cache reads only its own *-cache files there
+    return path
+
+
+@functools.lru_cache(maxsize=None)
+def start(*, spectra: bool = False) -> None:
+    """A command's JAX: float64 and the caches (:func:`enable_caches`), once per process (a
+    batch worker calls it for every image)."""
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    enable_caches(spectra=spectra)
+
+
+@functools.lru_cache(maxsize=None)
+def fit_grid():
+    """The fits' Hankel grid, once per process, and from the cache after the first start
+    (building it is 3 s of Bessel functions; :func:`fitting.programs.stored_hankel_grid`)."""
+    from fitting.programs import stored_hankel_grid
+
+    start()  # the grid's dtype, and the folder it is kept in
+    return stored_hankel_grid()
+
+
+# ----------------------------------------------------------------------------- progress
+class Progress:
+    """A command's progress on stderr: one line per phase that takes seconds (reading,
+    compiling), ``PROG: [  1.2 s] message``, and a bar over a batch's jobs (tqdm).
+
+    ``enabled`` None shows them only where stderr is a terminal; ``-q`` passes False.
+    """
+
+    def __init__(self, prog: str, *, enabled: bool | None = None):
+        self.prog = prog
+        self.enabled = sys.stderr.isatty() if enabled is None else bool(enabled)
+        self.start = time.perf_counter()
+
+    def __call__(self, message: str) -> None:
+        if self.enabled:
+            print(f"{self.prog}: [{time.perf_counter() - self.start:5.1f} s] {message}", file=sys.stderr, flush=True)
+
+    def bar(self, total: int, *, desc: str, enabled: bool | None = None):
+        """A tqdm bar on stderr (``enabled`` None: as the lines are)."""
+        from tqdm import tqdm
+
+        return tqdm(total=total, desc=desc, file=sys.stderr, unit="image", dynamic_ncols=True,
+                    disable=not (self.enabled if enabled is None else enabled))
+
+
+# ----------------------------------------------------------------------------- errors and exit status
+def error_line(prog: str, error: BaseException) -> str:
+    """``PROG: error: `` and the first line of the error's message (its type where it has none)."""
+    message = str(error).splitlines()[0] if str(error) else type(error).__name__
+    return f"{prog}: error: {message}"
+
+
+def exit_status(prog: str, command, *args) -> int:
+    """Run ``command(*args)`` and return its exit status. Bad input (:class:`UsageError`, and the
+    library's ``ValueError`` and ``OSError``: missing or unreadable files, invalid scenes,
+    measurements and arguments) is one line on stderr and status 2; an interrupt is 130."""
+    try:
+        return command(*args)
+    except BrokenPipeError:  # `jsss | head`: the reader has what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error as Python flushes stdout
+        return 1
+    except (ValueError, OSError) as error:
+        print(error_line(prog, error), file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
+
+
+# ----------------------------------------------------------------------------- files
+def write_atomically(out, write) -> Path:
+    """``write(tmp_path)`` to a temporary file beside ``out``, then rename it to ``out``: readers
+    see the old file or the whole new one, never a part, and a failure leaves no temporary
+    file. The file gets the permissions a plain ``open`` would give it. Returns ``out``."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        umask = os.umask(0)  # mkstemp makes the file private (0600); a table or an image is not
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return out
+
+
+def write_text(out, text: str) -> Path:
+    """Write ``text`` to ``out`` atomically (:func:`write_atomically`)."""
+
+    def write(tmp):
+        with open(tmp, "w") as handle:
+            handle.write(text)
+
+    return write_atomically(out, write)
+
+
+# ----------------------------------------------------------------------------- subcommands
+class _CommandOrDefault(argparse._SubParsersAction):
+    """Subcommands, and a default command where the first positional names none.
+
+    ``fit-params sample.exr ...`` beside ``fit-params batch DIR ...`` (and ``jsss-render
+    scene.toml`` beside ``jsss-render fit ...``): argparse has no default subcommand, and
+    looking at ``argv[0]`` before parsing misreads ``fit-params -q batch ...`` and cannot list
+    the subcommands in ``--help``. So this is argparse's own subparsers action (the documented
+    ``add_subparsers(action=...)`` hook): argparse sorts the words into options, their values
+    and positionals as usual and hands this action the first positional with everything after
+    it. A subcommand's name runs that subcommand's parser; any other word is the default
+    command's first positional, and ``default_parser`` (the same options plus the default
+    command's positionals) reads it and the rest into the same namespace, keeping options
+    given before it. A file named like a subcommand is given as ``./batch``.
+    """
+
+    def __init__(self, option_strings, *, default_parser: argparse.ArgumentParser, **kwargs):
+        super().__init__(option_strings, **kwargs)
+        self.default_parser = default_parser
+        self.choices = None  # any word: a subcommand's name, else the default command's positional
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values[0] in self._name_parser_map:
+            return super().__call__(parser, namespace, values, option_string)
+        self.default_parser.parse_args(values, namespace)
+
+
+def add_commands(parser: argparse.ArgumentParser, *, default: argparse.ArgumentParser | None = None, **kwargs):
+    """``parser.add_subparsers(**kwargs)``; with ``default``, a first positional that names no
+    subcommand is the default command's, parsed by ``default`` (:class:`_CommandOrDefault`)."""
+    if default is None:
+        return parser.add_subparsers(**kwargs)
+    return parser.add_subparsers(action=_CommandOrDefault, default_parser=default, **kwargs)

@@ -1,0 +1,534 @@
+"""``fit-params``: measured beam-profile images in, sigma_a / sigma_s' out.
+
+    fit-params MEASUREMENT.exr --reference REF.exr --pixel-mm 0.05 --eta 1.3 [--dark DARK.exr]
+               [--reference-reflectance 0.99] [--json] [--plot fit.png]
+    fit-params T0.exr T1.exr T2.exr --saturation 0.2 --reference REF.exr ...   (exposure brackets)
+    fit-params --demo [--json] [--plot fit.png]
+    fit-params batch DIR_OR_GLOB --out table.csv [--eta 1.3] [--pixel-mm 0.05] [--manifest M.csv]
+
+The measurement itself is :mod:`measure.files` (read and check the files, fit them); this
+module is the command line around it. Bad input gives a one-line error and exit status 2,
+never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import glob
+import json
+import logging
+import math
+import re
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from ._console import Progress, UsageError, add_commands, exit_status, fit_grid, start, version, write_atomically, \
+    write_text
+
+__all__ = ["main", "parser"]
+
+PROG = "fit-params"
+
+EXPORTS = {"mitsuba": "_mitsuba.xml", "pbrt": ".pbrt", "blender": "_blender.py"}
+
+# How measure.files names the arguments in its messages: as this command's options.
+OPTION_NAMES = {"eta": "--eta", "pixel_mm": "--pixel-mm", "reference_reflectance": "--reference-reflectance",
+                "view_angle_deg": "--view-angle", "model": "--model", "saturation": "--saturation"}
+
+
+# ----------------------------------------------------------------------------- command line
+def _fit_options(parser):
+    """The options of a fit, shared by a single fit and ``batch``."""
+    parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
+    parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
+    parser.add_argument("--reference-reflectance", type=float, default=0.99,
+                        help="total reflectance of the reference (default 0.99, Spectralon)")
+    parser.add_argument("--model", default="transport", choices=["dipole", "transport"],
+                        help="profile model: transport (default; scaled Monte Carlo tables, exact to radiative "
+                             "transfer, eta 1.0-1.6) or dipole (diffusion: tens of percent off near the source)")
+    parser.add_argument("--g", type=float, default=0.0,
+                        help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9; default 0)")
+    parser.add_argument("--white-balance", default="none", choices=("none", "camera", "daylight"),
+                        help="multipliers applied to raw files (default none: the white reference calibrates each "
+                             "channel); the choice is recorded")
+    parser.add_argument("--view-angle", type=float, default=0.0, metavar="DEG",
+                        help="the camera's angle from the sample's normal in degrees (default 0: straight down); "
+                             "pixels record radiance toward it")
+    parser.add_argument("--exitance", action="store_true",
+                        help="read pixels as exitance (a simulation's tally of light leaving), not a camera's radiance")
+
+
+def _single_options() -> argparse.ArgumentParser:
+    """The options of a single fit (and --demo), as a parent of the command's parsers."""
+    options = argparse.ArgumentParser(add_help=False)
+    options.add_argument("--reference", help="white-reference image, same beam and camera")
+    options.add_argument("--dark", help="dark-frame image subtracted from both")
+    options.add_argument("--saturation", type=float, help="clip level of a bracket (needed with several frames)")
+    _fit_options(options)
+    options.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    options.add_argument("--plot", help="write a PNG of the profile and the fit")
+    options.add_argument("--export", action="append", choices=sorted(EXPORTS), metavar="FORMAT",
+                         help="write the fitted material for another renderer: mitsuba (XML scene, homogeneous "
+                              "medium in a dielectric), pbrt (pbrt-v4 subsurface material) or blender (a Python "
+                              "script for a Cycles random-walk Principled BSDF); repeat for several")
+    options.add_argument("--export-to", metavar="PREFIX",
+                         help="path prefix of the exported files (default: the measurement's name, in the current "
+                              "directory): PREFIX_mitsuba.xml, PREFIX.pbrt, PREFIX_blender.py")
+    options.add_argument("--unit-mm", type=float, default=1.0,
+                         help="millimetres per scene unit of the exported materials (default 1; 1000 for metres)")
+    options.add_argument("--scene", metavar="OUT.toml",
+                         help="write a jsss scene with the fitted material (and the fitted profile model) that "
+                              "jsss-render renders as it is")
+    options.add_argument("--demo", action="store_true", help="fit a synthetic marble measurement")
+    options.add_argument("--keep", metavar="DIR",
+                         help="with --demo: write the demo's EXRs (and the truth as JSON) to DIR and keep them")
+    options.add_argument("-q", "--quiet", action="store_true",
+                         help="no progress lines (they go to stderr, and only when it is a terminal)")
+    options.add_argument("--version", action="version", version=version(PROG))
+    return options
+
+
+_DESCRIPTION = ("Recover sigma_a and sigma_s' per channel from a beam-profile HDR image and a white reference "
+                "(Jensen et al. 2001). Also: 'fit-params batch ...' for many files.")
+_MEASUREMENT_HELP = ("measurement image: EXR (linear HDR), a camera raw file (.dng, .cr2, .nef, .arw, ...) or a 16-bit "
+                     "linear TIFF/PNG; or several exposure brackets to merge (exposure from each raw/TIFF file's "
+                     "metadata, or the EXR attribute jsss_exposure)")
+
+
+def parser() -> argparse.ArgumentParser:
+    """The ``fit-params`` parser: a single fit (the default command) and the ``batch`` subcommand."""
+    options = _single_options()
+    single = argparse.ArgumentParser(prog=PROG, description=_DESCRIPTION, parents=[options])
+    single.add_argument("measurement", nargs="+", help=_MEASUREMENT_HELP)
+    top = argparse.ArgumentParser(prog=PROG, description=_DESCRIPTION, parents=[options])
+    top.set_defaults(run=_fit, measurement=[])
+    commands = add_commands(top, default=single, dest="command", metavar="MEASUREMENT ... | batch",
+                            help=f"{_MEASUREMENT_HELP}; or the subcommand:")
+    _batch_parser(commands)
+    return top
+
+
+def _batch_parser(commands):
+    batch = commands.add_parser("batch", help="fit many measurements into one table (fit-params batch --help)",
+                                description=(
+        "Fit many measurements. Naming rule: NAME.exr is a measurement, NAME_ref.exr its reference, NAME_dark.exr "
+        "its optional dark frame; or list them in a manifest CSV (columns measurement, reference, and optionally dark, "
+        "pixel_mm, eta, reference_reflectance; paths relative to the manifest). A file that fails becomes a row with "
+        "status 'failed' and its error."))
+    batch.add_argument("target", nargs="?", help="directory or glob of measurement EXRs")
+    batch.add_argument("--out", required=True, help="output table (.csv, or .parquet with pyarrow)")
+    batch.add_argument("--manifest", help="CSV listing the measurements instead of the naming rule")
+    _fit_options(batch)
+    batch.add_argument("--workers", type=int, default=1,
+                       help="local Dask worker processes fitting in parallel (default 1: in this process); each "
+                            "compiles the fit once and reuses it for its images")
+    batch.add_argument("--scheduler", metavar="ADDRESS",
+                       help="fit on an existing dask.distributed cluster (e.g. tcp://host:8786) instead")
+    batch.add_argument("--resume", action="store_true",
+                       help="keep the rows of --out that are already fitted (status ok) and fit only the rest")
+    batch.add_argument("-q", "--quiet", action="store_true", help="no progress bar (on stderr, also when it is a file)")
+    batch.add_argument("--version", action="version", version=version(f"{PROG} batch"))
+    batch.set_defaults(run=_batch)
+
+
+def _view_angle(args):
+    return None if args.exitance else args.view_angle
+
+
+def main(argv=None) -> int:
+    """The ``fit-params`` console script; returns the exit status (2: bad input, one line)."""
+    args = parser().parse_args(argv)
+    return exit_status(PROG, args.run, args)
+
+
+# ----------------------------------------------------------------------------- a single fit
+def _fit(args) -> int:
+    if args.keep and not args.demo:
+        raise UsageError("--keep DIR goes with --demo (it keeps the demo's images)")
+    if not (math.isfinite(args.unit_mm) and args.unit_mm > 0):
+        raise UsageError(f"--unit-mm must be > 0 (millimetres per scene unit: 1 for mm, 1000 for metres); "
+                         f"got {args.unit_mm:g}")
+    if args.export_to and not args.export:
+        raise UsageError("--export-to PREFIX goes with --export FORMAT")
+    say = Progress(PROG, enabled=False if args.quiet else None)
+    if args.demo:
+        return _demo(args, say)
+    if not args.measurement:
+        raise UsageError("give a MEASUREMENT.exr (with --reference), or --demo, or 'batch'")
+    if not args.reference:
+        raise UsageError("--reference REF.exr is required (or use --demo)")
+    from measure.files import fit_images, read_measurement
+
+    say(f"reading {len(args.measurement)} frame(s), the reference{' and the dark frame' if args.dark else ''}")
+    images = read_measurement(args.measurement, args.reference, dark=args.dark, saturation=args.saturation,
+                              white_balance=args.white_balance, names=OPTION_NAMES)
+
+    def fit(model):
+        return fit_images(images, args.eta, pixel_mm=args.pixel_mm, reference_reflectance=args.reference_reflectance,
+                          model=model, g=args.g, view_angle_deg=_view_angle(args), grid=fit_grid(),
+                          names=OPTION_NAMES)
+
+    start()
+    say(f"fitting {args.model} (the first fit compiles: 10-20 s)")
+    result = fit(args.model)
+    comparison = _dipole_bias(result, lambda: fit("transport")) if args.model == "dipole" else None
+    _report(result, args, extra=comparison, stem=Path(args.measurement[0]).stem)
+    return 0
+
+
+def _demo(args, say) -> int:
+    from jsss.materials import jensen2001
+    from measure.files import fit_images, read_measurement
+    from measure.synth import synthesize, write_measurement
+
+    start()
+    marble = jensen2001("marble")
+    with contextlib.ExitStack() as stack:
+        # Without --keep the files live only as long as the fit; say so rather than name a folder that vanishes.
+        directory = Path(args.keep) if args.keep else Path(stack.enter_context(
+            tempfile.TemporaryDirectory(prefix="jsss-demo-")))
+        say("synthesizing the demo's images")
+        synthetic = synthesize(marble, pixel_mm=0.05, size=256, beam_sigma_mm=0.05, photons_per_unit=1e5, seed=1,
+                               model="transport", grid=fit_grid())
+        paths = write_measurement(directory, synthetic, name="marble")
+        if not args.json:
+            where = (f"written to {directory} (marble.exr, marble_ref.exr, marble_dark.exr, marble.json)" if args.keep
+                     else "(temporary files; --keep DIR keeps them)")
+            print(f"demo: synthetic camera image of marble (transport tables, 256 x 256 px, 0.05 mm pixels, "
+                  f"Gaussian beam 0.05 mm, shot and read noise) {where}")
+        say(f"fitting {args.model} (the first fit compiles: 10-20 s)")
+        images = read_measurement(paths["measurement"], paths["reference"], dark=paths.get("dark"), names=OPTION_NAMES)
+        result = fit_images(images, 1.5, model=args.model, g=args.g, view_angle_deg=_view_angle(args),
+                            grid=fit_grid(), names=OPTION_NAMES)
+    _report(result, args, truth=synthetic.truth, stem="marble")
+    return 0
+
+
+def _dipole_bias(result, fit_transport):
+    """Warn where the dipole's known bias exceeds its stated error: refit with the transport
+    model (exact to radiative transfer) and compare, channel by channel. Returns the JSON
+    entry (relative differences), or None where the tables do not cover eta or g."""
+    import numpy as np
+
+    from jsss import transport
+
+    try:
+        transport.check_supported(np.asarray(result.fit.medium.eta), result.g)
+    except ValueError:
+        return None
+    dipole_table, exact = result.table(), fit_transport().table()
+    out = {"sigma_a": [], "sigma_s_prime": []}
+    for i, channel in enumerate(dipole_table["channels"]):
+        for key in out:
+            value, error, reference = dipole_table[key][i], dipole_table[f"{key}_err"][i], exact[key][i]
+            out[key].append(value / reference - 1)
+            if abs(value - reference) > error:  # the same image: the difference is the models', not noise
+                print(f"{PROG}: warning: channel {channel}: the dipole's {key} {value:.4g} is {value / reference - 1:+.1%} "
+                      f"from the transport model's {reference:.4g} on the same image, {abs(value - reference) / error:.0f} "
+                      "times its stated error: diffusion's bias, not noise (use --model transport)", file=sys.stderr)
+    return {"dipole_minus_transport": out}
+
+
+def _format_table(table) -> str:
+    lines = [f"{'channel':<8} {'sigma_a [1/mm]':>22} {'sigma_s_prime [1/mm]':>22} {'total R_d':>10} "
+             f"{'mfp [mm]':>9} {'rel. resid.':>11}"]
+    for i, ch in enumerate(table["channels"]):
+        sa = f"{table['sigma_a'][i]:.5g} +- {table['sigma_a_err'][i]:.2g}"
+        ss = f"{table['sigma_s_prime'][i]:.5g} +- {table['sigma_s_prime_err'][i]:.2g}"
+        lines.append(f"{ch:<8} {sa:>22} {ss:>22} {table['total_reflectance'][i]:>10.4f} "
+                     f"{table['mean_free_path_mm'][i]:>9.4f} {table['rel_residual'][i]:>11.2e}")
+    return "\n".join(lines)
+
+
+def _plot(result, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from jsss import transport
+    from jsss.diffusion import dipole
+
+    prof = result.profile
+    fig, ax = plt.subplots(figsize=(6, 4))
+    r = np.geomspace(max(prof.r_mm[0], 1e-3), prof.r_mm[-1], 200)
+    if result.model == "transport":
+        model = np.asarray(transport.profile(result.fit.medium, r, g=result.g)).reshape(r.size, -1)
+    else:
+        model = np.asarray(dipole.profile(result.fit.medium, r)).reshape(r.size, -1)
+    colours = {"R": "tab:red", "G": "tab:green", "B": "tab:blue"}
+    for c, name in enumerate(result.channels):
+        colour = colours.get(name, "k")
+        ax.errorbar(prof.r_mm, prof.mean[:, c], yerr=prof.stderr[:, c], fmt=".", ms=3, color=colour,
+                    label=f"{name} measured")
+        ax.plot(r, model[:, c], "-", color=colour, lw=1, label=f"{name} {result.model} fit")
+    ax.set(xscale="log", yscale="log", xlabel="r [mm]", ylabel="R_d(r) [1/mm^2]", title="fit-params")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    kind = Path(path).suffix.lower().lstrip(".") or "png"  # the temporary file's name has no suffix
+    write_atomically(path, lambda tmp: fig.savefig(tmp, dpi=120, format=kind))
+    plt.close(fig)
+
+
+def _write_exports(result, args, stem) -> list[str]:
+    """The fitted material for other renderers (--export) and as a jsss scene (--scene).
+
+    Returns the lines that say what was written (stdout, or stderr with --json)."""
+    from measure import export
+
+    from ._scene_files import fitted_material, sphere_scene
+
+    said = []
+    medium, g = result.fit.medium, result.g
+    prefix = Path(args.export_to) if args.export_to else Path(stem)
+    writers = {"mitsuba": export.mitsuba_xml, "pbrt": export.pbrt_material, "blender": export.blender_python}
+    for kind in dict.fromkeys(args.export or []):
+        path = prefix.with_name(prefix.name + EXPORTS[kind])
+        write_text(path, writers[kind](medium, g=g, unit_mm=args.unit_mm, name=prefix.name))
+        said.append(f"{kind} material written to {path}")
+    if args.scene:
+        write_text(args.scene, sphere_scene(fitted_material(medium, profile=result.model, g=g),
+                                            label=f"fit-params {stem}"))
+        said.append(f"scene written to {args.scene} (render it: jsss-render {args.scene})")
+    return said
+
+
+def _report(result, args, truth=None, extra=None, stem="fitted"):
+    table = {**result.table(), **(extra or {})}
+    for channel, quality in zip(table["channels"], table["quality"]):
+        if quality != "ok":  # a residual far beyond its noise model
+            print(f"{PROG}: warning: channel {channel}: {quality}", file=sys.stderr)
+    for message in result.warnings:
+        print(f"{PROG}: warning: {message}", file=sys.stderr)
+    if args.plot:
+        _plot(result, args.plot)
+    for line in _write_exports(result, args, stem):
+        print(line, file=sys.stderr if args.json else sys.stdout)
+    if args.json:
+        if truth is not None:
+            table = {**table, "truth": truth}
+        print(json.dumps(table, indent=2))
+        return
+    print(_format_table(table))
+    if truth is not None:
+        print("\ntruth beside estimate:")
+        print(f"{'channel':<8} {'sigma_a true':>13} {'estimate':>10} {'rel.err':>8} "
+              f"{'sigma_s_prime true':>19} {'estimate':>10} {'rel.err':>8}")
+        for i, ch in enumerate(table["channels"]):
+            ta, ts = truth["sigma_a"][i], truth["sigma_s_prime"][i]
+            ea, es = table["sigma_a"][i], table["sigma_s_prime"][i]
+            print(f"{ch:<8} {ta:>13.5g} {ea:>10.5g} {ea / ta - 1:>8.2%} {ts:>19.5g} {es:>10.5g} {es / ts - 1:>8.2%}")
+    if args.plot:
+        print(f"\nplot written to {args.plot}")
+
+
+# ----------------------------------------------------------------------------- batch
+_ROLE = re.compile(r"_(ref|dark)$|_ref_t\d+$|_t\d+$")
+
+
+def _find_jobs(target, manifest):
+    """(measurement, reference, dark, overrides) tuples from a manifest or the naming rule."""
+    if manifest:
+        manifest = Path(manifest)
+        if not manifest.is_file():
+            raise UsageError(f"{manifest}: no such manifest")
+        jobs = []
+        with manifest.open(newline="") as handle:
+            reader = csv.DictReader(handle)
+            if not reader.fieldnames or not {"measurement", "reference"} <= set(reader.fieldnames):
+                raise UsageError(f"{manifest}: needs columns measurement,reference[,dark,pixel_mm,eta,reference_reflectance]")
+            for row in reader:
+                base = manifest.parent
+                overrides = {k: float(row[k]) for k in ("pixel_mm", "eta", "reference_reflectance") if row.get(k)}
+                jobs.append((base / row["measurement"], base / row["reference"],
+                             (base / row["dark"]) if row.get("dark") else None, overrides))
+        return jobs
+    path = Path(target)
+    if not path.is_dir() and not glob.has_magic(str(target)):
+        raise UsageError(f"{target}: no such directory" + ("" if not path.exists() else " (a file: give its directory, "
+                                                           "a glob or --manifest)"))
+    from measure.photo import RAW_SUFFIXES
+
+    suffixes = {".exr", ".tif", ".tiff", ".png", *RAW_SUFFIXES}
+    candidates = sorted(path.iterdir()) if path.is_dir() else sorted(Path(p) for p in glob.glob(str(target)))
+    candidates = [p for p in candidates if p.suffix.lower() in suffixes and not _ROLE.search(p.stem)]
+    if not candidates:
+        raise UsageError(f"{target}: no measurement images found (NAME.exr, or a raw, TIFF or PNG file, with "
+                         "NAME_ref beside it)")
+    jobs = []
+    for m in candidates:
+        dark = m.with_name(f"{m.stem}_dark{m.suffix}")
+        jobs.append((m, m.with_name(f"{m.stem}_ref{m.suffix}"), dark if dark.exists() else None, {}))
+    return jobs
+
+
+_ROW_KEYS = ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance", "mean_free_path_mm",
+             "rel_residual", "chi2_reduced", "converged", "quality", "field_diffusion_lengths")
+
+
+def _fit_row(job, options) -> dict:
+    """One batch row: the fit of one measurement, or its failure (recorded, never dropped).
+
+    A plain function of picklable arguments, so that it runs the same in this process or on
+    a Dask worker (where the compiled fit and the grid stay warm between images)."""
+    from measure.files import fit_images, read_measurement
+
+    start()
+    measurement, reference, dark, overrides = job
+    row = {"file": str(measurement), "status": "ok", "error": "", "warnings": ""}
+    try:
+        images = read_measurement(measurement, reference, dark=dark, white_balance=options["white_balance"],
+                                  names=OPTION_NAMES)
+        result = fit_images(images, overrides.get("eta", options["eta"]),
+                            pixel_mm=overrides.get("pixel_mm", options["pixel_mm"]),
+                            reference_reflectance=overrides.get("reference_reflectance",
+                                                                options["reference_reflectance"]),
+                            model=options["model"], g=options["g"], view_angle_deg=options["view_angle_deg"],
+                            grid=fit_grid(), names=OPTION_NAMES)
+        table = result.table()
+        for key in _ROW_KEYS:
+            for ch, value in zip(table["channels"], table[key]):
+                row[f"{key}_{ch}"] = value
+        row["warnings"] = "; ".join(result.warnings)
+    except Exception as error:  # recorded in the table, never dropped
+        row.update(status="failed", error=f"{type(error).__name__}: {error}")
+    return row
+
+
+# Worker processes keep BLAS/OpenMP to one thread each; XLA keeps its own thread pool. On this
+# 2-core machine one process already keeps both cores busy (XLA threads the fit's dense
+# transforms): forcing one XLA thread per worker made a fit 2.3x slower, and 2 workers of the
+# default threading were 0.78-0.84x one process (benchmarks/batch.py). Workers pay off with
+# more cores than one fit can use, and on a cluster.
+_WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+
+
+def _fitted(jobs, args):
+    """Fit every job: in this process (one worker), on local Dask worker processes
+    (``--workers N``) or on the cluster at ``--scheduler``. Yields ``(index, row)`` as each
+    job finishes (in job order in this process, as they come on workers)."""
+    options = dict(pixel_mm=args.pixel_mm, eta=args.eta, reference_reflectance=args.reference_reflectance,
+                   model=args.model, g=args.g, view_angle_deg=_view_angle(args), white_balance=args.white_balance)
+    if not jobs:
+        return
+    # The bar is the batch's record of how far it got: shown in logs too (not only on a terminal), unless -q.
+    progress = Progress(f"{PROG} batch", enabled=not args.quiet)
+    if args.workers == 1 and not args.scheduler:
+        with progress.bar(len(jobs), desc=f"{PROG} batch") as bar:
+            for i, job in enumerate(jobs):
+                bar.set_postfix_str(job[0].name)
+                row = _fit_row(job, options)
+                bar.update()
+                yield i, row
+        return
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise UsageError("--workers/--scheduler need dask.distributed: pip install 'dask[distributed]'") from None
+    with contextlib.ExitStack() as stack:
+        if args.scheduler:
+            try:
+                client = stack.enter_context(Client(args.scheduler, timeout="10s"))
+            except OSError as error:
+                raise UsageError(f"--scheduler {args.scheduler}: cannot connect ({error})") from None
+        else:
+            cluster = stack.enter_context(LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+                                                       dashboard_address=None, env=_WORKER_ENV,
+                                                       silence_logs=logging.ERROR))
+            client = stack.enter_context(Client(cluster))
+        futures = {client.submit(_fit_row, job, options, pure=False): i for i, job in enumerate(jobs)}
+        workers = len(client.scheduler_info()["workers"])
+        with progress.bar(len(jobs), desc=f"{PROG} batch, {workers} workers") as bar:
+            for future in as_completed(futures):
+                i = futures[future]
+                try:
+                    row = future.result()
+                except Exception as error:  # a worker that died: the row still says so
+                    row = {"file": str(jobs[i][0]), "status": "failed", "error": f"{type(error).__name__}: {error}"}
+                bar.set_postfix_str(jobs[i][0].name, refresh=False)
+                bar.update()
+                yield i, row
+
+
+def _resumed(jobs, out):
+    """Rows of ``out`` already fitted (status ok), by file, and the jobs still to run (``--resume``)."""
+    out = Path(out)
+    if not out.is_file():
+        return {}, jobs
+    if out.suffix == ".parquet":
+        try:
+            import pyarrow.parquet as pq
+        except ImportError:
+            raise UsageError(f"{out}: resuming a .parquet table needs pyarrow") from None
+        old = pq.read_table(out).to_pylist()
+    else:
+        with out.open(newline="") as handle:
+            old = list(csv.DictReader(handle))
+    done = {row["file"]: row for row in old if row.get("status") == "ok"}
+    return {f: row for f, row in done.items() if f in {str(job[0]) for job in jobs}}, \
+        [job for job in jobs if str(job[0]) not in done]
+
+
+def _write_table(rows, out):
+    """Write CSV (or Parquet) atomically (temp file beside ``out``, then rename): no partial tables."""
+    out = Path(out)
+    # Columns in the order the rows hold them (the image's channel order, e.g. R, G, B), not sorted.
+    columns = list(dict.fromkeys(["file", "status", "error"] + [k for r in rows for k in r]))
+
+    def write(tmp):
+        if out.suffix == ".parquet":
+            try:
+                import pyarrow as pa
+                import pyarrow.parquet as pq
+            except ImportError:
+                raise UsageError(f"{out}: writing .parquet needs pyarrow; install it or use .csv") from None
+            pq.write_table(pa.Table.from_pylist([{c: r.get(c) for c in columns} for r in rows]), tmp)
+        else:
+            with open(tmp, "w", newline="") as handle:
+                writer = csv.DictWriter(handle, fieldnames=columns)
+                writer.writeheader()
+                writer.writerows(rows)
+
+    write_atomically(out, write)
+
+
+def _batch(args) -> int:
+    """``fit-params batch``; returns the exit status (1 if any row failed).
+
+    The table is written (atomically) as rows finish, at most once a second, and whatever
+    finished is written when the batch stops early (an interrupt, a lost scheduler), so
+    ``--resume`` carries on from there."""
+    if not args.target and not args.manifest:
+        raise UsageError("batch needs a directory/glob or --manifest")
+    if args.workers < 1:
+        raise UsageError(f"--workers must be at least 1; got {args.workers}")
+    jobs = _find_jobs(args.target, args.manifest)
+    kept, todo = _resumed(jobs, args.out) if args.resume else ({}, jobs)
+    if kept:
+        print(f"resuming: {len(kept)} row(s) of {args.out} already fitted, {len(todo)} to fit", file=sys.stderr)
+    rows = [kept.get(str(job[0])) for job in jobs]  # in job order; None: not fitted yet
+    index = {str(job[0]): i for i, job in enumerate(jobs)}
+    written, unwritten = time.monotonic(), False
+    try:
+        for i, row in _fitted(todo, args):
+            rows[index[str(todo[i][0])]], unwritten = row, True
+            if time.monotonic() - written >= 1.0:
+                _write_table([r for r in rows if r is not None], args.out)
+                written, unwritten = time.monotonic(), False
+    finally:
+        if unwritten or not todo:
+            _write_table([r for r in rows if r is not None], args.out)
+    failed = [r for r in rows if r["status"] != "ok"]
+    print(f"{len(rows) - len(failed)} fitted, {len(failed)} failed; table written to {args.out}")
+    for r in failed:
+        print(f"  failed: {r['file']}: {r['error']}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

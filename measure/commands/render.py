@@ -1,0 +1,324 @@
+"""``jsss-render``: render TOML scenes to PNG (display) and EXR (linear radiance); ``jsss-render
+fit``: a material from a photo of an object whose scene (geometry, camera, lights) is known.
+
+Examples
+--------
+::
+
+    jsss-render examples/marble_sphere.toml -o marble.png --plan --timings
+    jsss-render examples/ketchup_plane.toml --method image-space --samples 64
+    jsss-render examples/*.toml -o renders/
+    jsss-render fit examples/marble_sphere.toml photo.exr -o fitted/
+    jsss-render fit scene.toml photo.exr --json --profile transport --mask mask.png
+
+The renderer is :mod:`jsss.render`, the fit :func:`fitting.fit_render`; the command lives
+here, above both in the dependency order, because it reads photos and writes images.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from ._console import Progress, UsageError, add_commands, error_line, exit_status, start, version, \
+    write_atomically, write_text
+
+__all__ = ["main", "parser"]
+
+PROG = "jsss-render"
+
+_EPILOG = """\
+examples:
+  jsss-render examples/marble_sphere.toml -o marble.png --plan --timings
+  jsss-render examples/ketchup_plane.toml --method image-space --samples 64
+  jsss-render examples/*.toml -o renders/       (several scenes: -o is a directory)
+  jsss-render fit scene.toml photo.exr          (fit the material to a photo: jsss-render fit --help)
+
+The scene format (geometry, material, lights, camera, render) is described in the README,
+section "Scene files". A scene that fails is reported in one line; the others still render
+and the exit status is 2.
+"""
+
+_FIT_EPILOG = """\
+The photo is linear (EXR, 16-bit TIFF/PNG or camera raw) at the scene camera's resolution;
+pixels are proportional to the radiance toward the camera. The scene's material gives eta,
+the surface roughness and the starting guess of sigma_a and sigma_s'. Pixels used: the object
+as the camera sees it, without silhouette and grazing pixels, without saturated pixels
+(--saturation) and where --mask is non-zero. Writes PHOTO.fit.json (the parameters with
+standard errors, the artist's reflectance and mean free path, the covariance, warnings),
+PHOTO.fit.toml (the scene with the fitted material, which jsss-render renders as it is; the
+rest of the scene file is kept, comments included) and PHOTO.fit.png (photo, fit and whitened
+residual side by side). Exit status 2 on bad input (one line).
+"""
+
+_DESCRIPTION = ("Render TOML scenes of translucent objects to a PNG (display) and an EXR (linear radiance), planning "
+                "the passes each scene needs. Also: 'jsss-render fit ...' fits a material to a photo.")
+
+
+# ----------------------------------------------------------------------------- command line
+def _methods() -> tuple[str, ...]:
+    from jsss.render.passes import Method
+
+    return tuple(m.option for m in Method)
+
+
+def _render_options(methods) -> argparse.ArgumentParser:
+    options = argparse.ArgumentParser(add_help=False)
+    options.add_argument("-o", "--output", default=None,
+                         help="PNG to write (default: the scene's name .png); with several scenes a directory. The "
+                              "linear EXR goes beside each PNG")
+    options.add_argument("--plan", action="store_true", help="print which passes run and why")
+    options.add_argument("--timings", action="store_true", help="time each pass (compiles first, median of 3)")
+    options.add_argument("--accuracy", type=float, default=None, help="override the scene's accuracy target")
+    options.add_argument("--method", default="auto", choices=("auto", *methods),
+                         help="how to render subsurface light (default: the planner's choice from its calibration "
+                              "table)")
+    options.add_argument("--samples", type=int, default=None, help="image-space samples per pixel")
+    options.add_argument("--normal-filter", default="spectral", choices=("spectral", "naive"),
+                         help="which Patro filter --method normal-filtering uses")
+    options.add_argument("--float64", action="store_true", help="render in float64 (default float32)")
+    options.add_argument("--no-exr", action="store_true", help="write only the PNG")
+    options.add_argument("-q", "--quiet", action="store_true",
+                         help="no progress lines (they go to stderr, and only when it is a terminal)")
+    options.add_argument("--version", action="version", version=version(PROG))
+    return options
+
+
+def parser() -> argparse.ArgumentParser:
+    """The ``jsss-render`` parser: rendering scenes (the default command) and the ``fit`` subcommand."""
+    methods = _methods()
+    options = _render_options(methods)
+    formatting = dict(epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter, description=_DESCRIPTION)
+    scenes = argparse.ArgumentParser(prog=PROG, parents=[options], **formatting)
+    scenes.add_argument("scenes", nargs="+", metavar="scene", help="TOML scene file(s) (see examples/)")
+    top = argparse.ArgumentParser(prog=PROG, parents=[options], **formatting)
+    top.set_defaults(run=_render, prog=PROG)
+    commands = add_commands(top, default=scenes, dest="command", required=True, metavar="scene ... | fit",
+                            help="TOML scene file(s) (see examples/); or the subcommand:")
+    _fit_parser(commands, methods)
+    return top
+
+
+def _fit_parser(commands, methods):
+    p = commands.add_parser("fit", epilog=_FIT_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+                            help="fit a scene's material to a photo of it (jsss-render fit --help)",
+                            description="Fit sigma_a and sigma_s' per channel (and an exposure gain) of a scene's "
+                                        "homogeneous material to a linear HDR photo of it, by inverse rendering.")
+    p.add_argument("scene", help="TOML scene file: geometry, camera and lights as photographed")
+    p.add_argument("photo", help="linear HDR photo (EXR, 16-bit TIFF/PNG, raw) at the camera's resolution")
+    p.add_argument("-o", "--output", default=".", help="directory for the .fit.json/.toml/.png (default: here)")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
+    p.add_argument("--mask", default=None, help="image of the camera's size; pixels where it is 0 are not fitted")
+    p.add_argument("--saturation", type=float, default=None,
+                   help="pixel value at which the camera clipped; pixels at or above it are not fitted")
+    p.add_argument("--noise", type=float, default=0.01,
+                   help="relative noise of a pixel (default 0.01); the stated errors widen if the fit is worse")
+    p.add_argument("--profile", choices=("dipole", "transport"), default=None,
+                   help="profile model (default: the scene's; transport is exact to radiative transfer)")
+    p.add_argument("--g", type=float, default=None, help="Henyey-Greenstein g of the transport profile")
+    p.add_argument("--method", default="auto", choices=("auto", *methods),
+                   help="render method during the fit (default: the planner's choice for --accuracy)")
+    p.add_argument("--accuracy", type=float, default=0.001,
+                   help="accuracy target of the fit's renders (default 0.001: a fit needs a stricter render than "
+                        "a display does)")
+    p.add_argument("--no-gain", action="store_true",
+                   help="the photo is calibrated radiance: hold the exposure gain at 1")
+    p.add_argument("--no-specular", action="store_true", help="the photo holds subsurface light only")
+    p.add_argument("--rim-mm", type=float, default=0.0,
+                   help="leave out pixels within this distance [mm] of an open surface's rim (default 0)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument("--version", action="version", version=version(f"{PROG} fit"))
+    p.set_defaults(run=_fit, prog=f"{PROG} fit")
+
+
+def main(argv=None) -> int:
+    """The ``jsss-render`` console script; returns the exit status (2: bad input, one line each)."""
+    args = parser().parse_args(argv)
+    return exit_status(args.prog, args.run, args)
+
+
+# ----------------------------------------------------------------------------- rendering
+def _outputs(args) -> list[Path]:
+    """The PNG path of each scene: -o as a file for one scene, as a directory for several."""
+    names = [Path(Path(scene).with_suffix(".png").name) for scene in args.scenes]
+    if args.output is None:
+        return names
+    output = Path(args.output)
+    if len(args.scenes) == 1 and output.suffix.lower() == ".png":
+        return [output]
+    if len(args.scenes) == 1 and not output.is_dir() and output.suffix:
+        raise UsageError(f"-o {output}: the output is a PNG (name.png) or a directory; got suffix {output.suffix}.")
+    return [output / name for name in names]
+
+
+def _render(args) -> int:
+    """Render every scene; a scene that fails is one line on stderr, the others still render
+    (exit status 2 if any failed)."""
+    outputs = _outputs(args)
+    say = Progress(PROG, enabled=False if args.quiet else None)
+    start(spectra=True)  # planning fits profiles in float64; float32 frames unless --float64
+    failed = 0
+    for scene_path, output in zip(args.scenes, outputs):
+        try:
+            written = _render_one(scene_path, output, args, say)
+        except (ValueError, OSError) as error:  # SceneError, ExrError, ...: this scene's, in one line
+            print(error_line(PROG, error), file=sys.stderr)
+            failed += 1
+            continue
+        print("wrote " + ", ".join(written), flush=True)
+    return 2 if failed else 0
+
+
+def _render_one(scene_path, output: Path, args, say) -> list[str]:
+    import jax.numpy as jnp
+    import matplotlib.image
+
+    from jsss.render import SceneError, load_scene, plan_scene, render
+    from jsss.render.passes import Method
+    from jsss.render.shading import tone_map
+    from measure.exr import write_exr
+
+    say(f"{scene_path}: loading the scene")
+    scene = load_scene(scene_path)
+    if args.accuracy is not None and not 0 < args.accuracy < 1:
+        raise SceneError(f"--accuracy must lie in (0, 1); got {args.accuracy}.")
+    method = None if args.method == "auto" else Method(args.method)
+    say(f"{scene_path}: planning (fits the material's profile)")
+    plan = plan_scene(scene, accuracy=args.accuracy, method=method, samples=args.samples,
+                      normal_filter=args.normal_filter)
+    if args.plan:
+        print(plan.describe(), flush=True)
+    say(f"{scene_path}: rendering with {plan.method} (the first frame compiles: 10-20 s)")
+    result = render(scene, plan, dtype=jnp.float64 if args.float64 else jnp.float32, time_passes=args.timings)
+    image, exposure = tone_map(result.radiance, exposure=scene.exposure)
+    write_atomically(output, lambda tmp: matplotlib.image.imsave(tmp, image, format="png"))
+    written = [str(output)]
+    if not args.no_exr:
+        exr = output.with_suffix(".exr")
+        write_exr(exr, result.radiance, attributes={"jsss_scene": str(scene_path), "jsss_exposure": exposure})
+        written.append(str(exr))
+    if args.timings:
+        print(f"timings (ms) of {scene_path}:")
+        for name, seconds in result.timings.items():
+            print(f"  {name:<28} {1000 * seconds:9.1f}")
+    say(f"{scene_path}: done")
+    return written
+
+
+# ----------------------------------------------------------------------------- fit
+def _read_mask(path, shape):
+    import numpy as np
+
+    from measure.photo import read_image
+
+    suffix = Path(path).suffix.lower()
+    if suffix in (".png", ".jpg", ".jpeg", ".bmp") and not _is_16bit_png(path):
+        import matplotlib.image
+
+        pixels = np.asarray(matplotlib.image.imread(path), float)
+    else:
+        pixels = read_image(path).pixels
+    pixels = pixels if pixels.ndim == 2 else pixels[..., :3].max(-1)
+    if pixels.shape != shape:
+        raise UsageError(f"--mask {path}: {pixels.shape[1]} x {pixels.shape[0]} pixels, but the photo is "
+                         f"{shape[1]} x {shape[0]}.")
+    return pixels > 0
+
+
+def _is_16bit_png(path) -> bool:
+    with open(path, "rb") as f:
+        head = f.read(25)
+    return head[:8] == b"\x89PNG\r\n\x1a\n" and len(head) > 24 and head[24] == 16
+
+
+def _figure(photo, result, sigma_noise, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from jsss.render.shading import tone_map
+
+    shown, exposure = tone_map(photo)
+    fit, _ = tone_map(result.image, exposure=exposure)
+    level = np.maximum(np.abs(photo).mean(-1), 1e-300)
+    residual = np.where(result.mask, (result.image - photo).mean(-1) / (sigma_noise * level), np.nan)
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), constrained_layout=True)
+    axes[0].imshow(shown)
+    axes[0].set_title("photo")
+    axes[1].imshow(fit)
+    axes[1].set_title(f"fit ({result.method}, {result.profile_model})")
+    im = axes[2].imshow(residual, cmap="RdBu_r", vmin=-4, vmax=4)
+    axes[2].set_title("(fit - photo) / noise, fitted pixels")
+    fig.colorbar(im, ax=axes[2], shrink=0.85)
+    for ax in axes:
+        ax.set_axis_off()
+    fig.savefig(path, dpi=110, format="png")  # the path may be a temporary name without a suffix
+    plt.close(fig)
+
+
+def _fit(args) -> int:
+    say = Progress(args.prog, enabled=False if args.quiet else None)
+    if not (args.noise > 0):
+        raise UsageError(f"--noise must be > 0; got {args.noise}.")
+    if not 0 < args.accuracy < 1:
+        raise UsageError(f"--accuracy must lie in (0, 1); got {args.accuracy}.")
+    start(spectra=True)
+    from fitting.render import fit_render
+    from jsss.render import load_scene
+    from jsss.render.passes import Method
+    from measure.photo import read_image
+
+    from ._scene_files import fitted_material, scene_with_material
+
+    say(f"{args.scene}: loading the scene and the photo")
+    scene = load_scene(args.scene)
+    photo = read_image(args.photo).pixels
+    if photo.ndim == 3 and photo.shape[2] >= 3:
+        photo = photo[..., :3]
+    mask = _read_mask(args.mask, photo.shape[:2]) if args.mask else None
+    method = None if args.method == "auto" else Method(args.method)
+    t0 = time.perf_counter()
+    result = fit_render(scene, photo, noise=args.noise, mask=mask, saturation=args.saturation, method=method,
+                        accuracy=args.accuracy, profile_model=args.profile, g=args.g, gain=not args.no_gain,
+                        specular=not args.no_specular, rim_mm=args.rim_mm,
+                        progress=lambda line: say(f"{args.scene}: {line}"))
+    seconds = time.perf_counter() - t0
+    out = Path(args.output)
+    stem = Path(args.photo).name.rsplit(".", 1)[0]
+    summary = result.as_dict() | {"scene": str(args.scene), "photo": str(args.photo), "seconds": round(seconds, 3)}
+    material = scene.material
+    fitted = fitted_material(result.medium, profile=summary["profile_model"],
+                             g=material.g if args.g is None else args.g, roughness=material.roughness,
+                             specular=material.specular,
+                             comment=f"fitted by jsss-render fit ({summary['profile_model']} profile, "
+                                     f"{summary['method']}); errors in the .fit.json")
+    files = {out / f"{stem}.fit.json": json.dumps(summary, indent=2) + "\n",
+             out / f"{stem}.fit.toml": scene_with_material(Path(args.scene).read_text(), fitted)}
+    for path, text in files.items():
+        write_text(path, text)
+    figure = write_atomically(out / f"{stem}.fit.png", lambda tmp: _figure(photo, result, args.noise, tmp))
+    for warning in result.warnings:
+        print(f"{args.prog}: warning: {warning}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"fitted {args.photo} ({result.method}, {result.profile_model} profile, {result.n_pixels} pixels, "
+              f"{result.steps} steps, {seconds:.1f} s, chi2/dof {result.chi2_reduced:.2f})")
+        rows = [("sigma_a [1/mm]", summary["sigma_a"], summary["sigma_a_err"]),
+                ("sigma_s' [1/mm]", summary["sigma_s_prime"], summary["sigma_s_prime_err"]),
+                ("R_d", summary["reflectance"], summary["reflectance_err"]),
+                ("mean free path [mm]", summary["mean_free_path_mm"], summary["mean_free_path_err_mm"])]
+        for name, values, errors in rows:
+            print(f"  {name:<20}" + "  ".join(f"{v:.5g} +- {e:.2g}" for v, e in zip(values, errors)))
+        print(f"  {'gain':<20}{summary['gain']:.5g} +- {summary['gain_err']:.2g}")
+    print("wrote " + ", ".join(str(p) for p in [*files, figure]), file=sys.stderr if args.json else sys.stdout)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
