@@ -174,7 +174,7 @@ def distance_to_surface(mesh: Mesh, point) -> float:
 
 def is_closed(mesh: Mesh) -> bool:
     """True when the welded surface has no boundary: every edge is shared by two triangles
-    (``trimesh.Trimesh.is_watertight``; False for a surface with no triangle left)."""
+    (``trimesh.Trimesh.is_watertight``)."""
     return bool(_welded_surface(mesh).is_watertight)
 
 
