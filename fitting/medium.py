@@ -11,7 +11,8 @@ from a good start, not many solves that each run until the slowest is done (7 st
 times one). A channel that does not converge so is solved again by Levenberg-Marquardt from
 7 spread starts. Standard errors come from the
 Jacobian at the solution, :math:`\mathrm{cov} = s^2 (J^T J)^{-1}` with
-:math:`s^2 = \chi^2/(m - 2)`.
+:math:`s^2 = \max(1, \chi^2/(m - 2))` (:mod:`fitting.statistics`; the inverse is a
+pseudo-inverse here, and a parameter the data do not feel is caught by ``converged``).
 
 The forward model is a parameter. ``"dipole"`` is the dipole profile convolved with the
 Gaussian beam (of standard deviation ``beam_sigma`` mm, from the reference image) through
@@ -43,6 +44,7 @@ from jsss import transport
 from jsss.diffusion import dipole
 from jsss.layers import hankel
 from fitting.programs import reusable_program
+from fitting.statistics import error_scale, reduced_chi2
 from jsss.beam import observable
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
@@ -165,14 +167,14 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
             params, loss, steps, ok = solve(jax.tree_util.tree_map(lambda x: x[best], candidates))
         jac = jax.jacfwd(lambda p: _residuals((p[0], p[1]), args))(jnp.stack(params))
         m = jnp.sum(usable) + (inv_total_err > 0)
-        chi2_red = loss / jnp.maximum(m - 2, 1)
+        chi2_red = reduced_chi2(loss, m, 2)
         normal_inverse = jnp.linalg.pinv(jac.T @ jac)
-        # s^2 = max(1, chi^2/dof), as fit_render: a chi^2/dof below 1 says the pooled noise model
+        # s^2 = max(1, chi^2/dof) (fitting.statistics, as fit_render): a chi^2/dof below 1 says the pooled noise model
         # overstates the bins' scatter, not that the estimate is better known than that noise.
         # What the residuals cannot show still moves the estimate: the transport tables' own
         # Monte Carlo noise is smooth in r and is absorbed into the parameters. Scaling the errors
         # down by chi^2/dof (0.34-0.69 on walk images) made |z| reach 3.1 on images where it is 2.4.
-        cov = normal_inverse * jnp.maximum(chi2_red, 1.0)
+        cov = normal_inverse * error_scale(chi2_red)
         # A calibration scale common to every bin and the total (the reference's sum) is
         # not in the per-bin errors: propagate it. Scaling the data by e^s shifts each log
         # residual by -s * inv_rel_err and the total residual by -s * total * inv_total_err.
