@@ -43,7 +43,7 @@ import jax.numpy as jnp  # noqa: E402
 
 from jsss import transport  # noqa: E402
 from jsss.medium import Medium  # noqa: E402
-from jsss.render import load_scene, plan_scene, render  # noqa: E402
+from jsss.render import Method, Pass, load_scene, plan_scene, render  # noqa: E402
 
 
 def path_traced(scene, name, *, spp, chunks, cache, interface="index-matched", variant="auto"):
@@ -159,7 +159,8 @@ def main(argv=None):
             big = scene
             material = dataclasses.replace(big.material, profile_model="transport")
             big = dataclasses.replace(big, material=material)
-            plan = plan_scene(big, accuracy=0.001, method="texture-space").replace("specular", False, "subsurface")
+            plan = plan_scene(big, accuracy=0.001, method=Method.TEXTURE_SPACE).replace(Pass.SPECULAR, False,
+                                                                                          "subsurface")
             clean = render(big, plan, dtype=jnp.float64).radiance
             photos.append((f"jsss transport render {big.camera.width}x{big.camera.height}, +1 % noise "
                            "(consistency for the transport fit; truth for the dipole's bias)", big,

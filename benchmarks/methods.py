@@ -30,7 +30,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
-from jsss.render import load_scene, plan_scene  # noqa: E402
+from jsss.render import Method, load_scene, plan_scene  # noqa: E402
 from jsss.render.calibration import leave_one_scene_out, load_calibration, save_calibration  # noqa: E402
 from jsss.render.comparison import compare_methods, scene_at_distance  # noqa: E402
 from jsss.render.reference import reference_radiance  # noqa: E402
@@ -39,7 +39,8 @@ from jsss.render.shading import tone_map  # noqa: E402
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 SCENES = ("marble_sphere", "ketchup_plane", "skin_backlit")
 DISTANCES = (0.5, 1.0, 4.0, 12.0)
-SHOWN = (("lambert", ""), ("normal filtering", "spectral"), ("image-space", "32 spp"), ("texture-space", "profile 5 %"))
+SHOWN = ((Method.LAMBERT, ""), (Method.NORMAL_FILTERING, "spectral"), (Method.IMAGE_SPACE, "32 spp"),
+         (Method.TEXTURE_SPACE, "profile 5 %"))
 
 
 def figure(near, path):

@@ -34,10 +34,9 @@ from scipy.ndimage import gaussian_filter  # noqa: E402
 from scipy.signal import fftconvolve  # noqa: E402
 
 from jsss import dipole  # noqa: E402
-from jsss.render import load_scene, parse_scene, plan_scene, prepare, render_params  # noqa: E402
+from jsss.render import Pass, TextureSpace, load_scene, parse_scene, plan_scene, prepare, render_params  # noqa: E402
 from jsss.render.blur import blur_schedule, hierarchical_blur  # noqa: E402
 from jsss.render.profiles import choose_variances, shared_variances, full_profile  # noqa: E402
-from jsss.render.renderer import diffusion_pass, exitance_pass, irradiance_pass, render_image  # noqa: E402
 
 sys.path.insert(0, ".")
 from benchmarks._timing import median_seconds  # noqa: E402
@@ -54,9 +53,16 @@ def plane_scene(name, size):
 
 def with_knobs(plan, *, variances=None, size=None, ratio=None, stretch=None):
     if stretch is not None:
-        plan = plan.replace("stretch correction", stretch, "benchmark")
+        plan = plan.replace(Pass.STRETCH_CORRECTION, stretch, "benchmark")
+    method = TextureSpace(size or plan.texture_size, plan.taps, ratio or plan.max_ratio)
     return dataclasses.replace(plan, variances=plan.variances if variances is None else variances,
-                               texture_size=size or plan.texture_size, max_ratio=ratio or plan.max_ratio)
+                               method_config=method)
+
+
+def diffused(plan, prep):
+    """The texel exitance of ``plan``'s texture-space method as a jitted function of (params, irradiance)."""
+    method = plan.method_config
+    return jax.jit(lambda p, e: method.texel_exitance(p, prep, method.diffusion(p, prep, e)))
 
 
 def texel_kernel(medium, texel, half):
@@ -82,7 +88,7 @@ def plane_table(quick):
             prep = prepare(scene, base)
             params = render_params(scene, base, dtype=jnp.float32)
             x = prep.texels.position[..., 0]
-            E = irradiance_pass(params, prep) * (x > -5.0)[..., None]
+            E = base.method_config.irradiance(params, prep) * (x > -5.0)[..., None]
             E64 = np.asarray(E, float)
             texel = 60.0 / size
             kern = texel_kernel(scene.material.medium, texel, size)
@@ -100,7 +106,7 @@ def plane_table(quick):
                     plan = with_knobs(base, variances=variances, ratio=ratio)
                     prep_n = prepare(scene, plan)
                     p = render_params(scene, plan, dtype=jnp.float32)
-                    frame = jax.jit(lambda p, e: exitance_pass(p, prep_n, plan, diffusion_pass(p, prep_n, plan, e)))
+                    frame = diffused(plan, prep_n)
                     M = np.asarray(frame(p, E), float)
                     t = median_seconds(lambda: jax.block_until_ready(frame(p, E)), repeats=3)
                     err = np.sqrt(((M - ref)[inner] ** 2).mean() / (ref[inner] ** 2).mean())
@@ -121,7 +127,7 @@ def sphere_table():
         base = with_knobs(plan_scene(scene, method="texture-space"), size=96)
         prep = prepare(scene, base)
         params = render_params(scene, base, dtype=jnp.float64)
-        E = np.asarray(irradiance_pass(params, prep), float)
+        E = np.asarray(base.method_config.irradiance(params, prep), float)
         m = prep.texels.mask
         pos, area = prep.texels.position[m], prep.texels.area[m]
         src = E[m] * area[:, None]
@@ -134,7 +140,7 @@ def sphere_table():
         for stretch in (True, False):
             plan = with_knobs(base, stretch=stretch)
             prep_s = prepare(scene, plan)
-            frame = jax.jit(lambda p, e: exitance_pass(p, prep_s, plan, diffusion_pass(p, prep_s, plan, e)))
+            frame = diffused(plan, prep_s)
             M = np.asarray(frame(params, jnp.asarray(E)))[m]
             t = median_seconds(lambda: jax.block_until_ready(frame(params, jnp.asarray(E))), repeats=3)
             err = np.sqrt(((M - ref)[lat] ** 2).mean() / (ref[lat] ** 2).mean())
@@ -181,11 +187,10 @@ def example_frames():
         plan = plan_scene(scene, method="texture-space")
         prep = prepare(scene, plan)
         params = render_params(scene, plan, dtype=jnp.float32)
-        material = scene.material
-        E = jax.jit(lambda p: irradiance_pass(p, prep))(params)
-        chain = jax.jit(lambda p, e: diffusion_pass(p, prep, plan, e))
-        frame = jax.jit(lambda p: render_image(p, prep, plan, roughness=material.roughness,
-                                               specular=material.specular))
+        method = plan.method_config
+        E = jax.jit(lambda p: method.irradiance(p, prep))(params)
+        chain = jax.jit(lambda p, e: method.diffusion(p, prep, e))
+        frame = jax.jit(lambda p: method.radiance(p, prep))
         jax.block_until_ready((chain(params, E), frame(params)))
         t_chain = median_seconds(lambda: jax.block_until_ready(chain(params, E)), repeats=5)
         t_frame = median_seconds(lambda: jax.block_until_ready(frame(params)), repeats=5)

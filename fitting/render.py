@@ -10,18 +10,19 @@ Levenberg-Marquardt in one jitted call.
 
 What is fixed during a fit is computed once: the rasterisation, the shadow maps, the texel
 geometry and, for texture-space diffusion, the blur itself. With the Gaussian variances held
-fixed the diffused texture is linear in the Gaussian weights (d'Eon 2007 sec. 5), so each
-variance's blurred irradiance is looked up in the camera once, and one model evaluation is
+fixed the frame is linear in the Gaussian weights (d'Eon 2007 sec. 5) and its single
+scattering in the albedo: the renderer keeps it so, as :func:`jsss.render.linear_frame`
+(the same stages and composition as :func:`jsss.render.render`), and one model evaluation is
 the profile fit of the weights (:func:`jsss.render.profiles.render_profile`, differentiable
-in the medium), a weighted sum of those images and the per-pixel shading (single scattering
-included). The variances are planned for the starting material; if the fitted profile is not
-represented on them to the plan's accuracy, they are re-planned and the fit is repeated from
+in the medium) and :meth:`jsss.render.LinearFrame.radiance`. The variances are planned for
+the starting material; if the fitted profile is not represented on them to the plan's
+accuracy, they are re-planned and the fit is repeated from
 there (at most ``replans`` times); so are the oblique-incidence law that scales the irradiance
 and the depth at which point lights are read (:mod:`jsss.diffusion.incidence`), which depend on the
 medium (their change within the last round is not in the Jacobian). The pixel methods
 (Lambert, normal filtering, image-space) are differentiated through their whole frame.
 
-What the image constrains is reported, not assumed: the covariance
+What the image constrains is reported, not assumed (:mod:`fitting.statistics`): the covariance
 :math:`s^2 (J^T J)^{-1}` at the solution, with :math:`s^2 = \max(1, \chi^2/(m - n))` so that a
 model that cannot fit the photo (chi^2 per degree of freedom above 1) widens its errors
 rather than claiming noise-level precision, and a warning for each parameter whose relative
@@ -44,29 +45,15 @@ import numpy as np
 import optimistix as optx
 from scipy import ndimage
 
+from fitting.statistics import covariance, error_scale, reduced_chi2, standard_errors
 from jsss import transport
 from jsss.diffusion import dipole
-from jsss.fresnel import exit_lobe
 from jsss.diffusion.incidence import incidence_ratio
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
-from jsss.render import plan_scene
-from jsss.render.planner import deposit_change
-from jsss.render.image_space import camera_buffers
-from jsss.render.lighting import lookup
-from jsss.render.mesh import distance_to_rim
-from jsss.render.passes import Method, Pass
-from jsss.render.pixel_methods import pixel_radiance, prepare_pixels
+from jsss.render import (Material, Method, Pass, Scene, camera_buffers, deposit_change, distance_to_rim, linear_frame,
+                         plan_scene, render_params)
 from jsss.render.profiles import render_profile
-from jsss.render.renderer import (
-    diffusion_pass,
-    exitance_pass,
-    irradiance_pass,
-    prepare,
-    render_params,
-)
-from jsss.render.scene import Material, Scene
-from jsss.render.shading import single_scattering, specular_radiance
 
 __all__ = ["RenderFit", "RenderFitError", "fit_pixels", "fit_render"]
 
@@ -217,68 +204,15 @@ def _profile_radii(variances) -> np.ndarray:
     return np.geomspace(np.sqrt(v.min()) / 30, np.sqrt(v.max()) * 8, 600)
 
 
-class _TextureData(eqx.Module):
-    """Arrays of a texture-space fit: passed to the jitted solve, not captured as constants."""
-
-    basis: jax.Array  # (n, H, W, 3): pixel exitance of each variance with unit weights
-    variances: jax.Array
-    radii: jax.Array
-    exit_lobe: jax.Array  # (H, W, 3): radiance per unit diffusion exitance toward the camera
-    single_radiance: jax.Array  # (H, W, 3): single-scattered radiance and exitance of albedo 1
-    single_exitance: jax.Array
-    specular: jax.Array  # (H, W, 3): the surface reflection, fixed (it does not depend on the medium)
-    mask: jax.Array
-
-
-def _texture_data(scene: Scene, plan, dtype, blur_dtype=jnp.float32) -> _TextureData:
-    prep = prepare(scene, plan)
-    params = render_params(scene, plan, dtype=dtype)
-    # The blur is the one costly pass (seconds at 512^2); float32 keeps its images to 1e-7,
-    # far below any photo's noise, at half the time; the solve itself stays in ``dtype``.
-    low = render_params(scene, plan, dtype=blur_dtype)
-    blurred = diffusion_pass(low, prep, plan, irradiance_pass(low, prep))
-    n = len(plan.variances)
-    images = []
-    for i in range(n):  # exitance is linear in the weights: one image per variance, unit weight
-        term = eqx.tree_at(lambda p: (p.weights, p.variances), low,
-                           (jnp.ones((1, 3), blur_dtype), low.variances[i:i + 1]))
-        M = exitance_pass(term, prep, plan, blurred[i:i + 1])
-        images.append(lookup(M, prep.pixel_uv, prep.texels.mask).astype(dtype))
-    lights = tuple(g.astype(dtype) for g in prep.pixel_lights)
-    if plan.on(Pass.SPECULAR):
-        spec = specular_radiance(prep.pixel_normal, prep.pixel_view, lights, params.radiant, params.eta,
-                                 roughness=scene.material.roughness, weight=scene.material.specular)
-    else:
-        spec = jnp.zeros(prep.pixel_mask.shape + (3,), dtype)
-    cos_view = jnp.asarray((prep.pixel_normal * prep.pixel_view).sum(-1), dtype)
-    # Jensen's single-scattering BRDF (HG g = 0 on the reduced coefficients) is the albedo
-    # sigma_s'/sigma_t' times a factor of the geometry and eta alone: evaluated once at albedo 1.
-    if plan.on(Pass.SINGLE_SCATTERING) and params.medium is not None:
-        unit = Medium(jnp.zeros(3, dtype), jnp.ones(3, dtype), params.eta)
-        single_radiance, single_exitance = single_scattering(unit, prep.pixel_normal, prep.pixel_view, lights,
-                                                             params.radiant, deposit=params.deposit)
-    else:
-        single_radiance = single_exitance = jnp.zeros(prep.pixel_mask.shape + (3,), dtype)
-    return _TextureData(jnp.stack(images), jnp.asarray(plan.variances, dtype),
-                        jnp.asarray(_profile_radii(plan.variances), dtype),
-                        exit_lobe(cos_view[..., None], params.eta), jnp.asarray(single_radiance, dtype),
-                        jnp.asarray(single_exitance, dtype), jnp.asarray(spec, dtype),
-                        jnp.asarray(prep.pixel_coverage, dtype))
-
-
-def _texture_radiance(medium, data: _TextureData, profile_model: str, g: float):
-    """Linear radiance (H, W, 3) of a texture-space fit's scene for ``medium`` (variances fixed).
-
-    The same light as :func:`jsss.render.renderer.render_image` (tested): the diffusion
-    exitance less single scattering's share, spread by the exit lobe, plus the
-    single-scattered radiance, plus the surface reflection.
-    """
+def _texture_radiance(medium, data, profile_model: str, g: float):
+    """Linear radiance (H, W, 3) of a texture-space fit's scene for ``medium`` (variances fixed):
+    the weights the render profile fits for it on the frame's variances, and the reduced albedo,
+    through :meth:`jsss.render.LinearFrame.radiance`. ``data = (frame, radii)``."""
+    frame, radii = data
     material = Material("fit", np.ones(3), medium=medium, profile_model=profile_model, g=g)
-    weights = render_profile(material, data.variances, radii=data.radii, medium=medium).weights
-    exitance = jnp.einsum("nc,nhwc->hwc", weights.astype(data.basis.dtype), data.basis)
+    weights = render_profile(material, frame.variances, radii=radii, medium=medium).weights
     albedo = medium.sigma_s_prime / (medium.sigma_a + medium.sigma_s_prime)
-    diffuse = jnp.maximum(exitance - albedo * data.single_exitance, 0.0) * data.exit_lobe
-    return (diffuse + albedo * data.single_radiance + data.specular) * data.mask[..., None]
+    return frame.radiance(weights, albedo)
 
 
 @functools.lru_cache(maxsize=16)
@@ -296,32 +230,6 @@ def _incidence_moved(before: Scene, after: Scene) -> float:
     old = np.asarray(incidence_ratio(before.material.medium, cosines))
     new = np.asarray(incidence_ratio(after.material.medium, cosines))
     return float(np.max(np.abs(new / old - 1)))
-
-
-def _covariance(J, scale):
-    """``scale (J^T J)^-1`` on the directions the data see, and the directions they do not.
-
-    A direction along which the residuals do not change (an eigenvalue of J^T J below 1e-12
-    of the largest: Lambert's image is the same for sigma_a and sigma_s' scaled together)
-    has no finite variance. A pseudo-inverse would silently drop it and report small errors
-    for every parameter it involves, so it is returned as ``null`` (columns) instead.
-    """
-    H = J.T @ J
-    w, V = np.linalg.eigh(H)
-    seen = w > max(w.max(), 1e-300) * 1e-12
-    covariance = (V[:, seen] / w[seen]) @ V[:, seen].T * scale
-    return covariance, V[:, ~seen]
-
-
-def _standard_errors(gradients, covariance, null):
-    """Standard errors of quantities with ``gradients`` (rows) in the parameters: infinite for a
-    quantity that moves along a direction the data do not constrain."""
-    gradients = np.atleast_2d(gradients)
-    errors = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", gradients, covariance, gradients), 0, None))
-    if null.shape[1]:
-        leak = np.abs(gradients @ null).max(1) > 1e-6 * np.maximum(np.abs(gradients).max(1), 1e-300)
-        errors = np.where(leak, np.inf, errors)
-    return errors
 
 
 @functools.lru_cache(maxsize=16)
@@ -351,21 +259,22 @@ def _solve(residuals, theta0, args, *, max_steps, rtol, atol):
 
 
 def _model_for(scene, plan, dtype, profile_model, g):
-    """The forward model ``render(medium, data)`` and its data for one plan."""
+    """The forward model ``render(medium, data)`` and its data for one plan.
+
+    Texture space: the renderer's linear frame (:func:`jsss.render.linear_frame`; its blur in
+    float32, whose images are good to 1e-7, far below any photo's noise, at half the time;
+    the solve itself stays in ``dtype``). The pixel methods: their whole frame, differentiated
+    through (normal filtering's filter and image-space's sampling disc fixed at the plan's
+    material by ``prepare``)."""
     if plan.method == Method.TEXTURE_SPACE:
-        return _texture_render(profile_model, g), _texture_data(scene, plan, dtype)
-    start = render_params(scene, plan, dtype=dtype)
-    prep = prepare_pixels(scene, plan.method, start.profile, normal_filter=plan.normal_filter)
-    material = scene.material
+        frame = linear_frame(scene, plan, dtype=dtype, blur_dtype=jnp.float32)
+        return _texture_render(profile_model, g), (frame, jnp.asarray(_profile_radii(plan.variances), dtype))
+    method = plan.method_config
+    prepared = method.prepare(scene, plan, render_params(scene, plan, dtype=dtype))
     radii = _profile_radii(plan.variances)
 
     def render(medium, data):
-        p = render_params(scene, plan, medium=medium, dtype=dtype, radii=radii)
-        return pixel_radiance(plan.method, p.profile, p.radiant, p.eta, prep, samples=plan.samples, oblique=p.oblique,
-                              deposit=p.deposit,
-                              specular=plan.on(Pass.SPECULAR), roughness=material.roughness,
-                              specular_weight=material.specular, single_scattering=plan.on(Pass.SINGLE_SCATTERING),
-                              medium=p.medium)
+        return method.radiance(render_params(scene, plan, medium=medium, dtype=dtype, radii=radii), prepared)
     return render, ()
 
 
@@ -533,7 +442,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         fit_scene, plan = next_scene, next_plan
     r = np.asarray(residuals(theta, args))
     m = int(block_used.sum()) * 3  # used tiles times channels
-    chi2 = float(r @ r) / max(m - n_params, 1)
+    chi2 = reduced_chi2(r @ r, m, n_params)
     J = np.asarray(jac)
     if not (np.isfinite(r).all() and np.isfinite(J).all()):
         # A NaN from the renderer would otherwise surface as "eigenvalues did not converge".
@@ -541,12 +450,12 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
                              f"{np.exp(np.asarray(theta[:3])).tolist()}, "
                              f"sigma_s' = {np.exp(np.asarray(theta[3:6])).tolist()} ({plan.method}, {profile_model}); "
                              "this is a bug in jsss: please report it with the scene.")
-    covariance, null = _covariance(J, max(1.0, chi2))
+    cov, null = covariance(J, error_scale(chi2))
     theta_np = np.asarray(theta)
-    rel = _standard_errors(np.eye(len(theta_np)), covariance, null)  # errors of logarithms = relative errors
+    rel = standard_errors(np.eye(len(theta_np)), cov, null)  # errors of logarithms = relative errors
     A = np.asarray(jax.jacfwd(_artist)(theta[:6], profile_model, g, eta))
     artist = np.asarray(_artist(theta[:6], profile_model, g, eta))
-    artist_err = _standard_errors(np.pad(A, ((0, 0), (0, len(theta_np) - 6))), covariance, null)
+    artist_err = standard_errors(np.pad(A, ((0, 0), (0, len(theta_np) - 6))), cov, null)
     sigma_a, sigma_s = np.exp(theta_np[:3]), np.exp(theta_np[3:6])
     names = [f"ln sigma_a {c}" for c in "RGB"] + [f"ln sigma_s' {c}" for c in "RGB"] + (["ln gain"] if gain else [])
     loose = [f"{name[3:]} ({'inf' if not np.isfinite(e) else f'{100 * e:.0f} %'})"
@@ -570,7 +479,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     gain_value = float(np.exp(theta_np[6])) if gain else 1.0
     return RenderFit(final, sigma_a * rel[:3], sigma_s * rel[3:6], gain_value,
                      gain_value * float(rel[6]) if gain else 0.0, artist[:3], artist_err[:3], artist[3:],
-                     artist_err[3:], covariance, tuple(names), chi2, steps,
+                     artist_err[3:], cov, tuple(names), chi2, steps,
                      bool(solved) and not edge and bool(np.all(np.isfinite(theta_np)))
                      and bool(np.all(np.isfinite(rel))),
                      int(use.sum()), plan.method, profile_model,

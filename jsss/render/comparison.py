@@ -18,6 +18,7 @@ import numpy as np
 
 from .calibration import CalibrationRow
 from .mesh import is_closed
+from .methods import TextureSpace
 from .passes import Method, Pass
 from .planner import SAMPLE_KNOBS, TEXTURE_KNOBS, plan_scene
 from .reference import ReferenceFrame, reference_radiance
@@ -77,7 +78,7 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
         frame_ms = 1000 * sum(t for k, t in result.timings.items() if k not in _PREP)
         prep_ms = 1000 * sum(t for k, t in result.timings.items() if k in _PREP)
         own_ms = 1000 * sum(t for k, t in result.timings.items() if k in _OWN_PREP)
-        work = plan.texture_size**2 if method == Method.TEXTURE_SPACE else scene.camera.width * scene.camera.height
+        work = plan.method_config.work(scene)
         knob = plan.knob
         features = plan.features
         row = CalibrationRow(name, round(plan.blur_pixels, 4), method, knob,
@@ -85,7 +86,7 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
                              int(work), round(own_ms, 3), is_closed(scene.mesh),
                              blur_frame=round(features.blur_frame, 6), backlit=round(features.backlit, 4),
                              curvature=round(features.curvature, 5))
-        gaussians = len(plan.variances) if method == Method.TEXTURE_SPACE else 0
+        gaussians = len(plan.variances) if isinstance(plan.method_config, TextureSpace) else 0
         frames.append(MethodFrame(row, result.radiance, prep_ms, gaussians))
         if progress is not None:
             progress(f"{name}: {method} {knob}: {100 * row.error:.2f} % in {frame_ms:.1f} ms")

@@ -5,7 +5,9 @@
 (Mertens 2003) and ``texture-space`` diffusion (d'Eon 2007). The planner predicts each
 one's error and time for the scene from the measured calibration table
 (:mod:`.calibration`, written by ``benchmarks/methods.py --calibrate``) and takes the
-cheapest that meets the accuracy target; ``method=`` overrides it.
+cheapest that meets the accuracy target; ``method=`` overrides it. The plan carries it as an
+immutable configuration with its knobs (``plan.method_config``, one of :mod:`jsss.render.methods`),
+which :func:`jsss.render.render` runs.
 
 **Texture-space passes** (when that method runs):
 
@@ -54,12 +56,13 @@ from .calibration import (METHODS, FrameFeatures, choose_method, estimate_method
                           parse_knob)
 from .lighting import light_geometry, shadow_map
 from .mesh import distance_to_surface, is_closed
+from .methods import CONFIGURATIONS, ImageSpace, NormalFiltering, RenderMethod, TextureSpace
 from .passes import Method, Pass
 from .profiles import choose_variances, full_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
 
-__all__ = ["PassDecision", "Plan", "frame_features", "plan_scene"]
+__all__ = ["PassDecision", "Plan", "deposit_change", "frame_features", "method_config", "plan_scene"]
 
 STRETCH_THRESHOLD = 0.10
 PASS_ORDER = tuple(Pass)
@@ -76,38 +79,62 @@ class PassDecision:
 
 @dataclass(frozen=True, eq=False)
 class Plan:
-    """The passes to run, their knobs and the reasons.
+    """The method, the passes to run, their knobs and the reasons.
 
     Attributes
     ----------
     decisions : tuple of PassDecision, in pass order
-    variances : ndarray (n,) [mm^2], the shared Gaussian variances
+    variances : ndarray (n,) [mm^2], the shared Gaussian variances of the render profile
+        (every method's parameters are fitted on them; texture space blurs to each)
     profile_error : float, relative RMS error of that profile (worst channel)
-    texture_size : int; taps : int; max_ratio : float (blur step growth)
+    method_config : RenderMethod, the method and its knobs (:mod:`jsss.render.methods`):
+        ``Lambert()``, ``NormalFiltering(kind)``, ``ImageSpace(samples)`` or
+        ``TextureSpace(size, taps, max_ratio)``
     pixel_size : float [mm] footprint of a pixel at the object's nearest point
-    method : one of ``lambert``, ``normal filtering``, ``image-space``, ``texture-space``
     method_why : str; estimates : tuple of MethodEstimate (empty when the method was given)
-    knob : str, the chosen knob as the calibration table labels it (``"32 spp"``, ...)
-    samples : int, image-space samples per pixel; normal_filter : ``spectral`` or ``naive``
     blur_pixels : float, the profile's RMS radius over the pixel footprint
+    knob : str, the chosen knob as the calibration table labels it (``"32 spp"``, ...)
     features : FrameFeatures, what the method's predicted error rests on (:func:`frame_features`)
+
+    ``method`` (the :class:`~jsss.render.passes.Method`) and the knobs ``texture_size``,
+    ``taps``, ``max_ratio``, ``samples`` and ``normal_filter`` read the configuration (None
+    where the method has no such knob).
     """
 
     decisions: tuple
     variances: np.ndarray
     profile_error: float
-    texture_size: int
-    taps: int
-    max_ratio: float
+    method_config: RenderMethod
     pixel_size: float
-    method: Method = Method.TEXTURE_SPACE
     method_why: str = ""
     estimates: tuple = ()
-    samples: int = 32
-    normal_filter: str = "spectral"
     blur_pixels: float = 0.0
     knob: str = ""
     features: FrameFeatures | None = None
+
+    @property
+    def method(self) -> Method:
+        return self.method_config.method
+
+    @property
+    def texture_size(self) -> int | None:
+        return self.method_config.size if isinstance(self.method_config, TextureSpace) else None
+
+    @property
+    def taps(self) -> int | None:
+        return self.method_config.taps if isinstance(self.method_config, TextureSpace) else None
+
+    @property
+    def max_ratio(self) -> float | None:
+        return self.method_config.max_ratio if isinstance(self.method_config, TextureSpace) else None
+
+    @property
+    def samples(self) -> int | None:
+        return self.method_config.samples if isinstance(self.method_config, ImageSpace) else None
+
+    @property
+    def normal_filter(self) -> str | None:
+        return self.method_config.kind if isinstance(self.method_config, NormalFiltering) else None
 
     def on(self, name: Pass) -> bool:
         for d in self.decisions:
@@ -132,16 +159,20 @@ class Plan:
                 head.append(f"  {mark} {e.method:<18} {e.knob:<12} {100 * e.error:7.2f}% {e.ms:9.3g}  {e.basis}")
         width = max(len(d.name) for d in self.decisions)
         lines = [f"  {'on ' if d.on else 'off'}  {d.name:<{width}}  {d.why}" for d in self.decisions]
-        if self.method == Method.TEXTURE_SPACE:
-            knobs = (f"  knobs: {len(self.variances)} Gaussians (profile error {100 * self.profile_error:.2f} %), "
-                     f"texture {self.texture_size}^2, {self.taps}-tap blur, steps grow variance <= {self.max_ratio:g}x")
-        elif self.method == Method.IMAGE_SPACE:
-            knobs = f"  knobs: {self.samples} samples per pixel"
-        elif self.method == Method.NORMAL_FILTERING:
-            knobs = f"  knobs: {self.normal_filter} filter"
-        else:
-            knobs = "  knobs: none"
-        return "\n".join(head + ["plan:"] + lines + [knobs])
+        return "\n".join(head + ["plan:"] + lines + [f"  knobs: {self.method_config.describe(self)}"])
+
+
+def method_config(method: Method | str, *, texture_size: int = 512, taps: int = 7, max_ratio: float = 4.0,
+                  samples: int = 32, normal_filter: str = "spectral") -> RenderMethod:
+    """The configuration of ``method`` with those of the knobs it has (the others are not read).
+
+    Raises ``ValueError`` for an unknown method, or a knob the configuration refuses.
+    """
+    method = Method(method)
+    knobs = {Method.LAMBERT: {}, Method.NORMAL_FILTERING: {"kind": normal_filter},
+             Method.IMAGE_SPACE: {"samples": samples},
+             Method.TEXTURE_SPACE: {"size": texture_size, "taps": taps, "max_ratio": max_ratio}}[method]
+    return CONFIGURATIONS[method](**knobs)
 
 
 def _pixel_footprint(scene: Scene) -> float:
@@ -307,9 +338,10 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
         on, why = decisions[profile_pass]
         decisions[profile_pass] = (on, why + " (target not reachable with 12 Gaussians; best shown)")
     ordered = tuple(PassDecision(name, *decisions[name]) for name in PASS_ORDER)
-    return Plan(ordered, variances, error, size, 7, 2.0 if texture_target < 0.15 else 4.0, pixel,
-                method=method, method_why=method_why, estimates=estimates, samples=samples,
-                normal_filter=normal_filter, blur_pixels=blur, knob=knob, features=features)
+    config = method_config(method, texture_size=size, taps=7, max_ratio=2.0 if texture_target < 0.15 else 4.0,
+                           samples=samples, normal_filter=normal_filter)
+    return Plan(ordered, variances, error, config, pixel, method_why=method_why, estimates=estimates, blur_pixels=blur,
+                knob=knob, features=features)
 
 
 def _tsm_decision(scene: Scene, variances, weights, target):

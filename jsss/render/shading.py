@@ -33,7 +33,8 @@ from ..diffusion.incidence import deposit_depth
 from ..diffusion.single_scattering import single_scattering_albedo, single_scattering_brdf_from_cosines
 from .lighting import depth_falloff
 
-__all__ = ["diffuse_radiance", "single_scattering", "specular_radiance", "surface_radiance", "tone_map"]
+__all__ = ["diffuse_radiance", "frame_radiance", "single_scattering", "specular_radiance", "surface_radiance",
+           "tone_map"]
 
 
 def diffuse_radiance(exitance, cos_view, eta):
@@ -91,6 +92,37 @@ def single_scattering(medium, normals, view_dirs, light_geometry, radiant, *, de
     return radiance, exitance
 
 
+def frame_radiance(exitance, exit_lobe, coverage=None, *, single_scattering=None, specular=None):
+    r"""A frame's radiance from its parts: the one place they are put together.
+
+    .. math:: L = c\,\bigl(\max(M - M^{(1)}, 0)\,\Lambda + L^{(1)} + L_s\bigr)
+
+    Parameters
+    ----------
+    exitance : array (..., C) [W/mm^2]
+        Diffusion exitance :math:`M` of each point.
+    exit_lobe : array (..., C) [1/sr]
+        Radiance per unit exitance toward the eye, :math:`\Lambda` (:func:`jsss.fresnel.exit_lobe`).
+    coverage : array (...), optional
+        Share :math:`c` of each pixel the surface covers (default: 1).
+    single_scattering : pair of arrays (..., C), optional, keyword-only
+        Single-scattered radiance :math:`L^{(1)}` [W/(mm^2 sr)] and exitance :math:`M^{(1)}`
+        [W/mm^2] (:func:`single_scattering`). The dipole's source already holds every order of
+        scattering, so the first bounce *replaces* its share of the diffusion light (never
+        below zero; :func:`surface_radiance`). Without it :math:`M` is spread as it is.
+    specular : array (..., C), optional, keyword-only
+        The surface reflection :math:`L_s` [W/(mm^2 sr)] (:func:`specular_radiance`).
+    """
+    if single_scattering is None:
+        radiance = exitance * exit_lobe
+    else:
+        single_radiance, single_exitance = single_scattering
+        radiance = jnp.maximum(exitance - single_exitance, 0.0) * exit_lobe + single_radiance
+    if specular is not None:
+        radiance = radiance + specular
+    return radiance if coverage is None else radiance * coverage[..., None]
+
+
 def surface_radiance(exitance, cos_view, eta, *, medium=None, normals=None, view_dirs=None, light_geometry=(),
                      radiant=None, deposit=None):
     """Diffuse radiance of ``exitance``; with ``medium`` given, single scattering takes its share.
@@ -100,13 +132,13 @@ def surface_radiance(exitance, cos_view, eta, *, medium=None, normals=None, view
     to it: adding would return 1.07 times the light that entered at albedo 0.999, eta = 1.
     The diffusion exitance keeps what single scattering does not return (never below zero),
     spread by :func:`diffuse_radiance`, plus the single-scattered radiance: the frame's total
-    flux is the diffusion model's, its angular law exact for the first bounce.
+    flux is the diffusion model's, its angular law exact for the first bounce
+    (:func:`frame_radiance`).
     """
-    if medium is None:
-        return diffuse_radiance(exitance, cos_view, eta)
-    single_radiance, single_exitance = single_scattering(medium, normals, view_dirs, light_geometry, radiant,
-                                                         deposit=deposit)
-    return diffuse_radiance(jnp.maximum(exitance - single_exitance, 0.0), cos_view, eta) + single_radiance
+    single = None
+    if medium is not None:
+        single = single_scattering(medium, normals, view_dirs, light_geometry, radiant, deposit=deposit)
+    return frame_radiance(exitance, exit_lobe(jnp.asarray(cos_view)[..., None], eta), single_scattering=single)
 
 
 def specular_radiance(normals, view_dirs, light_geometry, radiant, eta, *, roughness, weight):

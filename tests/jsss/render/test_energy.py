@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from jsss.render import parse_scene, plan_scene, render
+from jsss.render import Method, Pass, parse_scene, plan_scene, render
 from jsss.render.reference import reference_radiance
 from tests.helpers import fresnel_reflectance_numpy
 
@@ -67,10 +67,10 @@ def _centre(radiance):
 def _radiance(scene, method, single=False):
     if method == "reference":
         return reference_radiance(scene, samples=20000).radiance
-    plan = plan_scene(scene, method=method).replace("specular", False, "test: diffuse only")
-    plan = plan.replace("single scattering", single, "test")
-    if method == "texture-space":  # the planner would skip a blur narrower than a pixel: run it anyway
-        plan = plan.replace("diffusion", True, "test: blur even below a pixel")
+    plan = plan_scene(scene, method=method).replace(Pass.SPECULAR, False, "test: diffuse only")
+    plan = plan.replace(Pass.SINGLE_SCATTERING, single, "test")
+    if plan.method == Method.TEXTURE_SPACE:  # the planner would skip a blur narrower than a pixel: run it anyway
+        plan = plan.replace(Pass.DIFFUSION, True, "test: blur even below a pixel")
     return render(scene, plan, dtype=jnp.float64).radiance
 
 

@@ -9,15 +9,14 @@ import pytest
 from scipy.special import ndtr
 
 from jsss import Medium
-from jsss.render import Plan, parse_scene, plan_scene, prepare, render_image, render_params
+from jsss.render import Plan, TextureSpace, parse_scene, plan_scene, prepare, render_image, render_params
 from jsss.render.lighting import LightGeometry, translucent_transmission
-from jsss.render.renderer import camera_pass, diffusion_pass, exitance_pass, irradiance_pass
 from jsss.render.shading import diffuse_radiance
 from tests.jsss.render.scenes import flat_plane, scene_dict
 
 
 def _with_texture(plan: Plan, size: int) -> Plan:
-    return dataclasses.replace(plan, texture_size=size)
+    return dataclasses.replace(plan, method_config=TextureSpace(size, plan.taps, plan.max_ratio))
 
 
 def _shadow_edge(material, size):
@@ -27,9 +26,10 @@ def _shadow_edge(material, size):
     plan = plan.replace("single scattering", False, "test: diffusion only")
     prep = prepare(scene, plan)
     params = render_params(scene, plan, dtype=jnp.float64)
+    method = plan.method_config
     x = prep.texels.position[..., 0]
-    E = irradiance_pass(params, prep) * ((x > 0) & prep.texels.mask)[..., None]
-    M = exitance_pass(params, prep, plan, diffusion_pass(params, prep, plan, E))
+    E = method.irradiance(params, prep) * ((x > 0) & prep.texels.mask)[..., None]
+    M = method.texel_exitance(params, prep, method.diffusion(params, prep, E))
     return scene, plan, prep, params, E, M, x
 
 
@@ -59,12 +59,14 @@ def test_radiance_across_a_shadow_edge_is_the_1d_integral_of_the_profile(name):
     # ... and the camera sees it: each pixel's radiance is the exit-Fresnel-weighted exitance
     # of the closed form at the pixel's own surface point, times the share of the pixel the
     # plane covers (1 inside, less on the pixels its edge crosses).
-    L = np.asarray(camera_pass(params, prep, plan, M, 0.35, 0.0))[32]
+    prep = dataclasses.replace(prep, shading=dataclasses.replace(prep.shading, specular=False))
+    L = np.asarray(plan.method_config.camera(params, prep, M))[32]
     px = (prep.pixel_uv[32, :, 0] - 0.5) * 40.0  # the plane is 40 mm wide
-    cos_view = (prep.pixel_normal[32] * prep.pixel_view[32]).sum(-1)
+    shading = prep.shading
+    cos_view = (shading.normal[32] * shading.view[32]).sum(-1)
     M_px = E0 * (w[None] * _rectangle(px, np.zeros_like(px), np.sqrt(v))).sum(1)
     L_px = np.asarray(diffuse_radiance(jnp.asarray(M_px), jnp.asarray(cos_view), params.eta))
-    L_px = L_px * prep.pixel_coverage[32][:, None]
+    L_px = L_px * shading.coverage[32][:, None]
     lit = np.asarray(diffuse_radiance(jnp.asarray(E0 * w.sum(0)), 1.0, params.eta))
     assert np.all(np.abs(L - L_px).max(0) < 0.01 * lit)
 
@@ -79,8 +81,8 @@ def test_diffusion_preserves_power_on_closed_surfaces():
         prep = prepare(scene, plan)
         params = render_params(scene, plan, dtype=jnp.float64)
         assert np.allclose(np.asarray(params.weights).sum(0), 1.0)
-        E = irradiance_pass(params, prep)
-        blurred = diffusion_pass(params, prep, plan, E)
+        E = plan.method_config.irradiance(params, prep)
+        blurred = plan.method_config.diffusion(params, prep, E)
         M = jnp.einsum("nc,nhwc->hwc", params.weights, blurred)
         area = prep.texels.area[..., None]
         ratio = (np.asarray(M) * area).sum((0, 1)) / (np.asarray(E) * area).sum((0, 1))

@@ -1,0 +1,134 @@
+r"""The texture-space frame as a function linear in the profile's weights and the albedo.
+
+With the Gaussian variances :math:`v_i` of the render profile held fixed, texture-space
+diffusion (d'Eon, Luebke, Enderton 2007 sec. 5) is linear in the weights :math:`w_{ic}`: each
+variance's blurred irradiance texture is computed once and the exitance is their weighted
+sum (the translucent shadow maps' light, sec. 5.4, is a weighted sum of the same textures).
+Jensen's single-scattering term (Jensen et al. 2001 sec. 2.2; Henyey-Greenstein with
+:math:`g = 0` on the reduced coefficients) is the albedo :math:`\alpha' = \sigma_s'/\sigma_t'`
+times a factor of the geometry and :math:`\eta` alone. So the frame of
+:func:`jsss.render.render` is, per pixel :math:`x` and channel :math:`c`,
+
+.. math:: L_c(x) = c(x)\,\Bigl(\max\bigl(\textstyle\sum_i w_{ic} B_{ic}(x)
+          - \alpha'_c M^{(1)}_c(x),\, 0\bigr)\,\Lambda_c(x) + \alpha'_c L^{(1)}_c(x) + S_c(x)\Bigr)
+
+with, all fixed for a scene and plan (:class:`LinearFrame`):
+
+* :math:`B_{ic}` [W/mm^2 per unit weight] -- the pixel's diffusion exitance of Gaussian
+  :math:`i` with unit weight: :math:`(G(v_i) * E)` looked up at the pixel, plus its
+  translucent-shadow-map light when that pass runs;
+* :math:`\Lambda_c` [1/sr] -- the exit lobe :math:`F_t(\cos\theta_o, \eta)/(\pi(1 - F_{dr,ext}))`;
+* :math:`L^{(1)}_c` [W/(mm^2 sr)], :math:`M^{(1)}_c` [W/mm^2] -- single-scattered radiance and
+  exitance at albedo 1 (when the plan runs that pass);
+* :math:`S_c` [W/(mm^2 sr)] -- the specular lobe (when the plan runs it);
+* :math:`c` -- the share of the pixel the surface covers.
+
+The parts come from the same code as the frame of :func:`jsss.render.render` -- the textures
+from the stages of :class:`jsss.render.methods.TextureSpace`, the per-pixel parts from
+:func:`jsss.render.methods.camera_parts` -- and are put together by the same
+:func:`jsss.render.shading.frame_radiance`: at the plan's own material
+:meth:`LinearFrame.radiance` is that frame up to rounding (tested). Away from it, what
+depends on the medium besides the weights and the albedo is held at the plan's: the
+irradiance's oblique-incidence law and the depth at which point lights are read
+(:mod:`jsss.diffusion.incidence`). A fit (:func:`fitting.render.fit_render`) re-plans when
+those move.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ..medium import Medium
+from .lighting import lookup
+from .methods import TextureSpace, camera_parts
+from .planner import Plan
+from .renderer import render_params
+from .scene import Scene
+from .shading import frame_radiance
+
+__all__ = ["LinearFrame", "linear_frame"]
+
+
+class LinearFrame(eqx.Module):
+    """The fixed parts of a texture-space frame (module docstring); arrays in one dtype.
+
+    Attributes
+    ----------
+    basis : (n, H, W, C) [W/mm^2], each Gaussian's pixel exitance with unit weight, :math:`B_i`
+    variances : (n,) [mm^2], the Gaussians' variances
+    exit_lobe : (H, W, C) [1/sr], radiance per unit diffusion exitance toward the camera
+    coverage : (H, W), share of each pixel the surface covers
+    single_radiance, single_exitance : (H, W, C) or None, single scattering at albedo 1
+        [W/(mm^2 sr)] and [W/mm^2]; None when the plan does not run that pass
+    specular : (H, W, C) or None [W/(mm^2 sr)], the surface reflection; None when off
+    """
+
+    basis: jax.Array
+    variances: jax.Array
+    exit_lobe: jax.Array
+    coverage: jax.Array
+    single_radiance: jax.Array | None = None
+    single_exitance: jax.Array | None = None
+    specular: jax.Array | None = None
+
+    def radiance(self, weights, albedo=None):
+        r"""Linear radiance (H, W, C) for Gaussian ``weights`` (n, C) on :attr:`variances` and the
+        reduced albedo ``albedo`` (C,) :math:`\sigma_s'/\sigma_t'` (read only when the frame has
+        single scattering). Linear in ``weights``; differentiable in both."""
+        exitance = jnp.einsum("nc,nhwc->hwc", weights.astype(self.basis.dtype), self.basis)
+        single = None
+        if self.single_radiance is not None:
+            if albedo is None:
+                raise ValueError("LinearFrame.radiance: this frame has single scattering; pass albedo= "
+                                 "(sigma_s' / (sigma_a + sigma_s') per channel).")
+            single = (albedo * self.single_radiance, albedo * self.single_exitance)
+        return frame_radiance(exitance, self.exit_lobe, self.coverage, single_scattering=single,
+                              specular=self.specular)
+
+
+def linear_frame(scene: Scene, plan: Plan, *, dtype=jnp.float64, blur_dtype=None, prepared=None) -> LinearFrame:
+    """The fixed parts of ``scene``'s texture-space frame under ``plan`` (module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+    plan : Plan
+        A texture-space plan (``plan.method_config`` a :class:`~jsss.render.methods.TextureSpace`).
+    dtype : the arrays' dtype
+    blur_dtype : optional
+        Dtype of the irradiance and its blur, the one costly pass (default ``dtype``). A fit
+        may take float32 there: its images are then good to about 1e-7, far below a photo's
+        noise, at half the time.
+    prepared : TexturePrepared, optional
+        The plan's prepared geometry, if it is at hand (``render(...).prepared``).
+
+    Raises
+    ------
+    ValueError
+        The plan's method is not texture space (other methods are not linear in the weights).
+    """
+    method = plan.method_config
+    if not isinstance(method, TextureSpace):
+        raise ValueError(f"linear_frame: the frame is linear in the profile's weights for texture space only; the "
+                         f"plan's method is {plan.method} (plan_scene(..., method='texture-space')).")
+    blur_dtype = dtype if blur_dtype is None else blur_dtype
+    prepared = method.prepare(scene, plan) if prepared is None else prepared
+    params = render_params(scene, plan, dtype=dtype)
+    low = render_params(scene, plan, dtype=blur_dtype)
+    blurred = method.diffusion(low, prepared, method.irradiance(low, prepared))
+    images = []
+    for i in range(len(plan.variances)):  # exitance is linear in the weights: one image per variance, unit weight
+        term = eqx.tree_at(lambda p: (p.weights, p.variances), low,
+                           (jnp.ones((1, 3), blur_dtype), low.variances[i:i + 1]))
+        M = method.texel_exitance(term, prepared, blurred[i:i + 1])
+        images.append(lookup(M, prepared.pixel_uv, prepared.texels.mask).astype(dtype))
+    unit = None  # single scattering at albedo 1: the geometry's factor alone
+    if params.medium is not None:
+        unit = Medium(jnp.zeros(3, dtype), jnp.ones(3, dtype), params.eta)
+    lobe, single, specular = camera_parts(params, prepared.shading, dtype, medium=unit)
+    single_radiance, single_exitance = (None, None) if single is None else single
+    return LinearFrame(jnp.stack(images), jnp.asarray(plan.variances, dtype), lobe,
+                       jnp.asarray(prepared.shading.coverage, dtype), single_radiance, single_exitance, specular)
+

@@ -1,0 +1,223 @@
+r"""The interface every render method implements, and the camera pass they all end with.
+
+As in Mitsuba 3 (one integrator per file behind ``ADIntegrator``), each method is an immutable
+configuration in a file of its own -- :class:`~jsss.render.methods.Lambert`,
+:class:`~jsss.render.methods.NormalFiltering`, :class:`~jsss.render.methods.ImageSpace`,
+:class:`~jsss.render.methods.TextureSpace` -- whose fields are its knobs, checked when it is
+built. The planner returns one (``plan.method_config``) and :func:`jsss.render.render` runs
+whichever it is through this interface:
+
+``prepare(scene, plan, params, *, timings=None) -> prepared``
+    Everything that depends on the geometry alone (NumPy, once per scene and plan): the
+    camera's G-buffer, shadow maps, texels or filtered normals, and which of the plan's
+    passes run.
+``stages(prepared) -> ((name, fn), ...)``
+    The frame's JAX passes in order; ``fn(params, previous)`` returns what the next one
+    reads, the last the radiance. :meth:`RenderMethod.radiance` runs them one after another
+    (under one ``jit`` in :func:`~jsss.render.render`); ``render(..., time_passes=True)``
+    compiles and times each on its own, under its name.
+``exitance(params, prepared)``
+    The light leaving the surface before the camera pass [W/mm^2] (per texel or per pixel).
+``describe(plan)``, ``work(scene)``
+    The knobs as :meth:`jsss.render.Plan.describe` prints them; the points a frame shades
+    (pixels or texels), which the calibration's frame time scales with.
+
+A prepared geometry (:class:`PreparedGeometry`) compares by the data it holds, so one compiled
+frame serves a scene prepared again (:func:`jsss.render.frame_program`).
+
+All methods end in :func:`camera_radiance`: the diffusion exitance :math:`M` of each pixel
+spread by the exit lobe, single scattering taking its share, plus the specular lobe, times
+the pixel's coverage (:func:`jsss.render.shading.frame_radiance`).
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+import functools
+import hashlib
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ...fresnel import exit_lobe
+from ..passes import Method, Pass
+from ..shading import frame_radiance, single_scattering, specular_radiance
+
+if TYPE_CHECKING:
+    from ..planner import Plan
+    from ..renderer import RenderParams
+    from ..scene import Scene
+
+__all__ = ["PixelShading", "PreparedGeometry", "RenderMethod", "camera_parts", "camera_radiance", "pixel_shading"]
+
+
+def _feed(digest, value) -> None:
+    """Add ``value`` (arrays, scalars, tuples, dataclasses, plain objects, nested) to ``digest``."""
+    if isinstance(value, (np.ndarray, np.generic)):
+        value = np.ascontiguousarray(value)
+        digest.update(f"array {value.dtype.str} {value.shape};".encode())
+        digest.update(value.tobytes())
+    elif value is None or isinstance(value, (bool, int, float, str, complex)):
+        digest.update(f"{type(value).__name__} {value!r};".encode())
+    elif isinstance(value, (tuple, list)):
+        digest.update(f"{type(value).__name__} {len(value)}(".encode())
+        for item in value:
+            _feed(digest, item)
+        digest.update(b")")
+    elif dataclasses.is_dataclass(value):
+        digest.update(f"{type(value).__qualname__}(".encode())
+        for field in dataclasses.fields(value):
+            _feed(digest, getattr(value, field.name))
+        digest.update(b")")
+    elif hasattr(value, "__dict__"):
+        digest.update(f"{type(value).__qualname__}(".encode())
+        for name, item in sorted(vars(value).items()):
+            digest.update(f"{name}=".encode())
+            _feed(digest, item)
+        digest.update(b")")
+    else:
+        raise TypeError(f"cannot digest a {type(value).__name__} in prepared geometry.")
+
+
+class PreparedGeometry:
+    """What a method's ``prepare`` returns (a frozen dataclass of NumPy data) is equal to another
+    holding the same data: equality and hash by a digest of every array and value in it, so a
+    frame compiled for one serves an equal one prepared again (:func:`jsss.render.render`)."""
+
+    @functools.cached_property
+    def digest(self) -> str:
+        """BLAKE2 digest of the data (computed once)."""
+        digest = hashlib.blake2b(digest_size=20)
+        _feed(digest, self)
+        return digest.hexdigest()
+
+    def __eq__(self, other) -> bool:
+        return type(other) is type(self) and other.digest == self.digest
+
+    def __hash__(self) -> int:
+        return hash(self.digest)
+
+
+@dataclass(frozen=True, eq=False)
+class PixelShading:
+    """What the camera pass reads per pixel, and which of its passes run (NumPy, fixed for a frame).
+
+    Attributes
+    ----------
+    normal : (H, W, 3) unit normals, turned towards the camera
+    view : (H, W, 3) unit directions from the surface point to the eye
+    coverage : (H, W) share of each pixel the surface covers (the frame's radiance is weighted by it)
+    lights : tuple of LightGeometry at the pixels, one per light
+    single_scattering, specular : bool, whether the plan runs these passes
+    roughness : float, Beckmann slope RMS m; specular_weight : float, scales the lobe
+    """
+
+    normal: np.ndarray
+    view: np.ndarray
+    coverage: np.ndarray
+    lights: tuple
+    single_scattering: bool
+    specular: bool
+    roughness: float
+    specular_weight: float
+
+
+def pixel_shading(scene: Scene, plan: Plan, buffers, lights) -> PixelShading:
+    """The camera pass's data for ``scene`` under ``plan``, from the camera's G-buffer and the lights at it."""
+    material = scene.material
+    return PixelShading(buffers.normal, buffers.view, buffers.coverage, tuple(lights),
+                        plan.on(Pass.SINGLE_SCATTERING), plan.on(Pass.SPECULAR), material.roughness,
+                        material.specular)
+
+
+def camera_parts(params: RenderParams, shading: PixelShading, dtype, *, medium=None):
+    r"""The camera pass's per-pixel parts besides the exitance, in ``dtype``: ``(exit_lobe,
+    single_scattering, specular)``.
+
+    ``exit_lobe`` (H, W, C) [1/sr] is :math:`F_t(\cos\theta_o, \eta)/(\pi(1 - F_{dr,ext}))`
+    (:func:`jsss.fresnel.exit_lobe`); ``single_scattering`` the pair (radiance [W/(mm^2 sr)],
+    exitance [W/mm^2]) of Jensen 2001's first bounce (:func:`jsss.render.shading.single_scattering`)
+    of ``medium`` (default the parameters' own), or None when the plan does not run it or the
+    material is not a homogeneous medium; ``specular`` the Beckmann lobe [W/(mm^2 sr)], or None
+    when the plan does not run it.
+    """
+    cos_view = jnp.asarray((shading.normal * shading.view).sum(-1), dtype)
+    lights = [g.astype(dtype) for g in shading.lights]
+    single = None
+    if shading.single_scattering and params.medium is not None:
+        single = single_scattering(params.medium if medium is None else medium, jnp.asarray(shading.normal, dtype),
+                                   jnp.asarray(shading.view, dtype), lights, params.radiant, deposit=params.deposit)
+    lobe = exit_lobe(cos_view[..., None], params.eta)
+    specular = None
+    if shading.specular:
+        specular = specular_radiance(shading.normal, shading.view, lights, params.radiant, params.eta,
+                                     roughness=shading.roughness, weight=shading.specular_weight)
+    return lobe, single, specular
+
+
+def camera_radiance(exitance, params: RenderParams, shading: PixelShading):
+    r"""Linear radiance (H, W, 3) [W/(mm^2 sr)] toward the camera of the diffusion exitance
+    ``exitance`` (H, W, C) [W/mm^2] of each pixel's surface point.
+
+    .. math:: L = c\,\bigl(\max(M - M^{(1)}, 0)\,\Lambda(\theta_o) + L^{(1)} + L_s\bigr),
+              \qquad \Lambda = \frac{F_t(\cos\theta_o, \eta)}{\pi\,(1 - F_{dr,ext})},
+
+    with the exit lobe :math:`\Lambda` [1/sr], Jensen 2001's single-scattered radiance
+    :math:`L^{(1)}` and exitance :math:`M^{(1)}` of the medium when the pass runs (it replaces its
+    share of the diffusion light: :func:`jsss.render.shading.surface_radiance`), the specular
+    lobe :math:`L_s` when it runs, and the pixel's coverage :math:`c` (:func:`camera_parts`,
+    :func:`jsss.render.shading.frame_radiance`).
+    """
+    dtype = exitance.dtype
+    lobe, single, specular = camera_parts(params, shading, dtype)
+    return frame_radiance(exitance, lobe, jnp.asarray(shading.coverage, dtype), single_scattering=single,
+                          specular=specular)
+
+
+class RenderMethod(eqx.Module):
+    """A way to produce a frame's subsurface light: an immutable configuration (abstract).
+
+    Subclasses are final: their fields are the method's knobs (static, so a configuration is
+    hashable and equal configurations compile to one program), checked in ``__check_init__``
+    with a ``ValueError`` naming the knob, its value and the fix.
+    """
+
+    method: eqx.AbstractClassVar[Method]  # set by each final subclass: the enumeration member it implements
+
+    @abc.abstractmethod
+    def prepare(self, scene: Scene, plan: Plan, params: RenderParams, *, timings: dict | None = None):
+        """Everything of ``scene`` under ``plan`` that depends on the geometry alone (NumPy).
+
+        ``params`` (:func:`jsss.render.render_params`) is read where a method's geometry depends on
+        the profile (normal filtering's filtered normals, image-space's sampling disc). Seconds
+        of each step are added to ``timings``.
+        """
+
+    @abc.abstractmethod
+    def stages(self, prepared) -> tuple[tuple[str, Callable], ...]:
+        """The frame's JAX passes in order, ``(name, fn)`` with ``fn(params, previous) -> next``;
+        the first reads ``previous = None``, the last returns the radiance (H, W, 3)."""
+
+    @abc.abstractmethod
+    def exitance(self, params: RenderParams, prepared):
+        """Light leaving the surface before the camera pass [W/mm^2], per texel or per pixel (..., C)."""
+
+    @abc.abstractmethod
+    def describe(self, plan: Plan) -> str:
+        """The knobs as :meth:`jsss.render.Plan.describe` prints them (after ``knobs: ``)."""
+
+    @abc.abstractmethod
+    def work(self, scene: Scene) -> int:
+        """Points a frame shades (pixels, or texels): what the calibration's frame time scales with."""
+
+    def radiance(self, params: RenderParams, prepared):
+        """Linear radiance (H, W, 3) of a prepared frame: its :meth:`stages` one after another.
+        A pure JAX function of ``params`` (``jit`` and ``grad`` go through it)."""
+        out = None
+        for _, stage in self.stages(prepared):
+            out = stage(params, out)
+        return out

@@ -1,0 +1,38 @@
+r"""Lambert: the profile's total albedo times the irradiance, no spread (no knobs).
+
+:math:`M(x) = \rho\,E(x)` with :math:`\rho = 2\pi\int_0^\infty R(r)\,r\,dr` the profile's total
+diffuse reflectance: right when the profile is smaller than a pixel, the planner's choice for
+a far or small object (the calibration table measures where).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, final
+
+from ..lighting import irradiance
+from ..passes import Method
+from .pixels import PixelMethod, PixelPrepared
+
+__all__ = ["Lambert"]
+
+
+@final
+class Lambert(PixelMethod):
+    """Total albedo times the irradiance at each pixel: :math:`M = \\rho E`. No knobs."""
+
+    method: ClassVar[Method] = Method.LAMBERT
+
+    def prepare_own(self, scene, profile, buffers, maps, timings):
+        return None, 0.0
+
+    def exitance(self, params, prepared: PixelPrepared):
+        """:math:`\\rho E` (H, W, C) [W/mm^2]; the irradiance scaled by the oblique-incidence law and
+        read at the deposit depth where ``params`` carry those media."""
+        dtype = params.radiant.dtype
+        albedo = params.profile.albedo().astype(dtype)
+        E = irradiance([g.astype(dtype) for g in prepared.lights], params.radiant, params.eta, medium=params.oblique,
+                       deposit=params.deposit)
+        return albedo * E
+
+    def describe(self, plan) -> str:
+        return "none"

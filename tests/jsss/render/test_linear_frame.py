@@ -1,0 +1,81 @@
+"""The linearised texture-space frame (jsss.render.linear_frame) against the renderer's own frame."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jsss.render import LinearFrame, linear_frame, parse_scene, plan_scene, render, render_params
+from jsss.render.passes import Pass
+from tests.jsss.render.scenes import scene_dict
+
+# Every part the linear frame holds fixed is exercised: a thin open fin (the unlit margin of an
+# open surface, translucent shadow maps) lit from behind by a directional light and from the
+# front by a point light (deposit depth), a homogeneous medium (single scattering, the
+# oblique-incidence law), the specular lobe.
+FIN = scene_dict(geometry={"shape": "fin", "thickness": 1.0, "segments": 16},
+                 material={"sigma_a": [0.05, 0.1, 0.3], "sigma_s_prime": [1.0, 1.2, 1.5], "eta": 1.3},
+                 lights=[{"type": "directional", "direction": [-1.0, 0.0, 0.0]},
+                         {"type": "point", "position": [-40.0, 10.0, 5.0], "intensity": 1000.0}],
+                 camera={"position": [-100.0, 0.0, 0.0], "fov": 30, "resolution": [32, 32]},
+                 render={"texture_size": 64, "accuracy": 0.05})
+EVERY_PASS = (Pass.DIFFUSION, Pass.TRANSLUCENT_SHADOW_MAPS, Pass.SINGLE_SCATTERING, Pass.OBLIQUE_INCIDENCE,
+              Pass.DEPOSIT_DEPTH, Pass.SPECULAR)
+
+
+@pytest.fixture(scope="module")
+def fin():
+    scene = parse_scene(FIN)
+    plan = plan_scene(scene, method="texture-space")
+    for name in EVERY_PASS:
+        plan = plan.replace(name, True, "test: every fixed part")
+    return scene, plan
+
+
+def _weights_and_albedo(scene, plan):
+    medium = scene.material.medium
+    albedo = medium.sigma_s_prime / (medium.sigma_a + medium.sigma_s_prime)
+    return render_params(scene, plan, dtype=jnp.float64).weights, jnp.asarray(albedo)
+
+
+def test_the_linear_frame_is_the_renderers_frame_at_the_plans_material(fin):
+    """At the plan's own material the weighted sum of fixed blurs is render()'s frame to 1e-12
+    of its brightest pixel (float64 throughout). The two differ only in rounding: the lookup is
+    linear, done per Gaussian and then summed rather than after the sum, and single scattering
+    is the albedo times its value at albedo 1 rather than evaluated at the albedo; float64
+    rounding through those few dozen operations is ~1e-15, and max(M - M1, 0) amplifies it by
+    at most M / (M - M1), about 1.1 here. A pass missing from either side moves pixels by 1e-4
+    of the brightest or more (checked below), eight orders above the tolerance."""
+    scene, plan = fin
+    frame = linear_frame(scene, plan, dtype=jnp.float64)
+    assert isinstance(frame, LinearFrame) and frame.single_radiance is not None and frame.specular is not None
+    weights, albedo = _weights_and_albedo(scene, plan)
+    model = np.asarray(frame.radiance(weights, albedo))
+    truth = render(scene, plan, dtype=jnp.float64).radiance
+    peak = np.abs(truth).max()
+    assert peak > 0 and (truth > 0).mean() > 0.2
+    assert np.abs(model - truth).max() <= 1e-12 * peak
+    # Each part matters at this tolerance: the frame without one of them is far from render()'s.
+    for name in (Pass.TRANSLUCENT_SHADOW_MAPS, Pass.SINGLE_SCATTERING, Pass.SPECULAR):
+        without = plan.replace(name, False, "test")
+        partial = np.asarray(linear_frame(scene, without, dtype=jnp.float64).radiance(weights, albedo))
+        assert np.abs(partial - truth).max() > 1e-4 * peak, name
+
+
+def test_the_linear_frame_is_linear_in_the_weights_and_the_albedo(fin):
+    """Twice the weights and the albedo, twice the frame less the specular lobe (fixed); the
+    frame with single scattering asks for the albedo."""
+    scene, plan = fin
+    frame = linear_frame(scene, plan, dtype=jnp.float64)
+    weights, albedo = _weights_and_albedo(scene, plan)
+    once = np.asarray(frame.radiance(weights, albedo))
+    twice = np.asarray(frame.radiance(2 * weights, 2 * albedo))
+    specular = np.asarray(frame.specular * frame.coverage[..., None])
+    np.testing.assert_allclose(twice - specular, 2 * (once - specular), rtol=1e-12, atol=1e-14 * np.abs(once).max())
+    with pytest.raises(ValueError, match="albedo="):
+        frame.radiance(weights)
+
+
+def test_only_texture_space_has_a_linear_frame(fin):
+    scene, _ = fin
+    with pytest.raises(ValueError, match="texture space only; the plan's method is lambert"):
+        linear_frame(scene, plan_scene(scene, method="lambert"))
