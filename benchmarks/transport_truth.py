@@ -44,7 +44,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import trimesh  # noqa: E402
 
-from jsss.render import load_scene, plan_scene, render  # noqa: E402
+from jsss.render import Method, Pass, load_scene, plan_scene, render  # noqa: E402
 from jsss.render.image_space import camera_buffers  # noqa: E402
 from jsss.render.reference import white_lambertian_radiance  # noqa: E402
 
@@ -264,11 +264,12 @@ def chandrasekhar_check(mi, *, albedo=0.18 / 0.241, spp=4096, chunks=2):
 
 
 def _ours(scene, method, samples=128, off=()):
-    plan = plan_scene(scene, method=method, samples=samples if method == "image-space" else None)
-    plan = plan.replace("specular", False, "subsurface only")
+    plan = plan_scene(scene, method=method, samples=samples if Method(method) == Method.IMAGE_SPACE else None)
+    plan = plan.replace(Pass.SPECULAR, False, "subsurface only")
     for name in off:
         plan = plan.replace(name, False, "benchmark: without it")
-    passes = ", ".join(name for name in ("single scattering", "oblique incidence", "deposit depth") if plan.on(name))
+    passes = ", ".join(name for name in (Pass.SINGLE_SCATTERING, Pass.OBLIQUE_INCIDENCE, Pass.DEPOSIT_DEPTH)
+                       if plan.on(name))
     return render(scene, plan, dtype=jnp.float64).radiance, passes or "none"
 
 

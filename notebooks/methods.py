@@ -33,7 +33,7 @@ jax.config.update("jax_enable_x64", True)  # references and planning in float64;
 import matplotlib.pyplot as plt
 import numpy as np
 
-from jsss.render import load_scene, plan_scene
+from jsss.render import Method, load_scene, plan_scene
 from jsss.render.comparison import VARIANTS, compare_methods, scene_at_distance
 from jsss.render.shading import tone_map
 
@@ -42,7 +42,7 @@ size = (40, 30) if FAST else (96, 72)
 points = 40_000 if FAST else 300_000
 # fast: one knob each for normal filtering and texture space (each frame is a compile); the
 # three image-space sample counts stay, for the 1/sqrt(N) plot below
-variants = [v for v in VARIANTS if not FAST or v[0] in ("lambert", "image-space")
+variants = [v for v in VARIANTS if not FAST or v[0] in (Method.LAMBERT, Method.IMAGE_SPACE)
             or v[1] in ({"normal_filter": "spectral"}, {"accuracy": 0.05})]
 examples = os.path.join(os.path.dirname(os.path.abspath("methods.ipynb")), "..", "examples")
 
@@ -63,7 +63,8 @@ for name in ("marble_sphere", "ketchup_plane"):
         print(f"  {f.row.method:<18} {f.row.knob:<13} {100 * f.row.error:7.2f}% {f.row.ms:9.3g}")
 
 # %%
-shown = [("lambert", ""), ("normal filtering", "spectral"), ("image-space", "32 spp"), ("texture-space", "profile 5 %")]
+shown = [(Method.LAMBERT, ""), (Method.NORMAL_FILTERING, "spectral"), (Method.IMAGE_SPACE, "32 spp"),
+         (Method.TEXTURE_SPACE, "profile 5 %")]
 fig, axes = plt.subplots(4, 5, figsize=(13, 8))
 for i, (name, (reference, frames)) in enumerate(results.items()):
     image, exposure = tone_map(reference.radiance)

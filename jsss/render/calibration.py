@@ -3,7 +3,7 @@
 ``benchmarks/methods.py --calibrate`` renders the example scenes (near, and far with the
 camera moved back) with every method and knob, measures each frame's error against a
 brute-force surface integral of the exact profile and its time, and writes
-``calibration.json`` next to this module. The planner reads that table; nothing here is a
+``jsss/data/calibration.json``. The planner reads that table; nothing here is a
 tuned constant.
 
 The error of a method depends on what the frame shows, described by

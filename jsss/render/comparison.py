@@ -1,7 +1,7 @@
 """Render one scene with every method and knob and measure each against the reference.
 
 Used by ``benchmarks/methods.py`` (the accuracy-vs-time table and the planner's
-calibration table) and by ``notebooks/methods.ipynb``. Frames are diffuse only (the
+calibration table) and by ``notebooks/methods.py``. Frames are diffuse only (the
 specular lobe is the same in every method) and timed per frame after compilation (median
 of ``repeats``); one-time geometry work (rasterizing, shadow maps, the Laplacian's
 eigenvectors) is reported apart as ``prep_ms``; the part of it only that method does is the

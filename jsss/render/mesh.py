@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Mesh", "box", "fin", "is_closed", "load_obj", "plane", "uv_sphere", "weld"]
+__all__ = ["Mesh", "box", "distance_to_rim", "distance_to_surface", "fin", "is_closed", "load_obj", "plane", "uv_sphere",
+           "weld"]
 
 
 @dataclass(frozen=True, eq=False)

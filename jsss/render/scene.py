@@ -50,7 +50,7 @@ from . import mesh as _mesh
 from .lighting import Light
 from .raster import PerspectiveView
 
-__all__ = ["Material", "Scene", "SceneError", "load_scene", "medium_scene_toml", "parse_scene"]
+__all__ = ["Material", "Scene", "SceneError", "load_scene", "parse_scene"]
 
 
 class SceneError(ValueError):
@@ -355,30 +355,3 @@ def load_scene(path) -> Scene:
     except tomllib.TOMLDecodeError as error:
         raise SceneError(f"{path}: not valid TOML ({error}).") from None
     return parse_scene(data, source=str(path), base_dir=path.parent)
-
-
-def medium_scene_toml(medium: Medium, *, label: str = "fitted", profile: str = "dipole", g: float = 0.0,
-                      roughness: float = 0.35) -> str:
-    """A scene file (TOML text) that shows ``medium`` on a 20 mm sphere under a key light.
-
-    ``jsss-render`` renders it as it is; ``profile``/``g`` carry the model the medium was
-    fitted with (``"transport"`` for the scaled Monte Carlo tables), so the render uses the
-    same profile as the fit. Edit ``[geometry]``, ``[[lights]]`` and ``[camera]`` to taste.
-    """
-    if profile not in ("dipole", "transport"):
-        raise ValueError(f"profile must be 'dipole' or 'transport'; got {profile!r}.")
-    as_list = lambda x: "[" + ", ".join(f"{float(v):.9g}" for v in np.broadcast_to(np.asarray(x, float), (3,))) + "]"  # noqa: E731
-    return (f"# {label}: written by jsss; lengths in mm, coefficients in 1/mm\n"
-            "[geometry]\nshape = \"sphere\"\nradius = 20.0\n\n"
-            "[material]\n"
-            f"sigma_a = {as_list(medium.sigma_a)}\n"
-            f"sigma_s_prime = {as_list(medium.sigma_s_prime)}\n"
-            f"eta = {as_list(medium.eta)}\n"
-            f"roughness = {float(roughness):.9g}\n"
-            f"profile = \"{profile}\"\n"
-            f"g = {float(g):.9g}\n\n"
-            "[[lights]]\ntype = \"directional\"\ndirection = [0.6, 0.8, -0.5]\ncolor = [1.0, 1.0, 1.0]\n"
-            "intensity = 1.0\n\n"
-            "[camera]\nposition = [0.0, -110.0, 30.0]\nlook_at = [0.0, 0.0, 0.0]\nfov = 28\n"
-            "resolution = [320, 240]\n\n"
-            "[render]\naccuracy = 0.05\ntexture_size = 512\n")

@@ -11,7 +11,6 @@ import pytest
 from jsss import Medium
 from measure import export
 from jsss.materials import jensen2001
-from jsss.render.scene import medium_scene_toml, parse_scene
 
 KETCHUP = jensen2001("ketchup")
 
@@ -97,19 +96,6 @@ def test_bad_options_are_named(kwargs, match):
 def test_one_index_per_material():
     with pytest.raises(ValueError, match="one index of refraction"):
         export.mitsuba_dict(Medium([0.1, 0.1, 0.1], [1.0, 1.0, 1.0], [1.3, 1.4, 1.5]))
-
-
-def test_scene_file_carries_the_medium_and_its_profile_model():
-    """The written scene parses back to the same medium, profile model and g."""
-    import tomllib
-
-    text = medium_scene_toml(KETCHUP, profile="transport", g=0.5)
-    scene = parse_scene(tomllib.loads(text))
-    np.testing.assert_allclose(np.asarray(scene.material.medium.sigma_a), KETCHUP.sigma_a)
-    np.testing.assert_allclose(np.asarray(scene.material.medium.sigma_s_prime), KETCHUP.sigma_s_prime)
-    assert scene.material.profile_model == "transport" and scene.material.g == 0.5
-    with pytest.raises(ValueError, match="profile must be"):
-        medium_scene_toml(KETCHUP, profile="pbd")
 
 
 def test_mitsuba_renders_the_export_and_a_white_furnace_returns_all_light():
