@@ -512,11 +512,13 @@ def _batch(args) -> int:
     if kept:
         print(f"resuming: {len(kept)} row(s) of {args.out} already fitted, {len(todo)} to fit", file=sys.stderr)
     rows = [kept.get(str(job[0])) for job in jobs]  # in job order; None: not fitted yet
-    index = {str(job[0]): i for i, job in enumerate(jobs)}
+    # Where each job still to fit sits in the table: by position, not by file, since a manifest
+    # may list one measurement twice (at two etas, say) and each is a row of its own.
+    where = [j for j, row in enumerate(rows) if row is None]
     written, unwritten = time.monotonic(), False
     try:
         for i, row in _fitted(todo, args):
-            rows[index[str(todo[i][0])]], unwritten = row, True
+            rows[where[i]], unwritten = row, True
             if time.monotonic() - written >= 1.0:
                 _write_table([r for r in rows if r is not None], args.out)
                 written, unwritten = time.monotonic(), False

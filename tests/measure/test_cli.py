@@ -134,12 +134,19 @@ def test_batch_on_dask_workers_matches_one_process_and_resumes(measurements, ser
     assert list(csv.DictReader(parallel.open())) == two
 
 
-def test_manifest_lists_measurements(measurements, tmp_path):
+def test_manifest_lists_measurements_and_one_measurement_twice_is_two_rows(measurements, tmp_path):
+    """A manifest row is a fit: the same image at two etas gives two rows, each its own fit."""
     manifest = measurements / "manifest.csv"
-    manifest.write_text("measurement,reference,dark,eta\nskin1.exr,skin1_ref.exr,skin1_dark.exr,1.3\n")
+    manifest.write_text("measurement,reference,dark,eta\nskin1.exr,skin1_ref.exr,skin1_dark.exr,1.3\n"
+                        "skin1.exr,skin1_ref.exr,skin1_dark.exr,1.4\n")
     out = run("batch", "--manifest", manifest, "--out", tmp_path / "m.csv")
     assert out.returncode == 0, out.stderr
-    assert len(list(csv.DictReader((tmp_path / "m.csv").open()))) == 1
+    rows = list(csv.DictReader((tmp_path / "m.csv").open()))
+    assert [row["status"] for row in rows] == ["ok", "ok"]
+    # In manifest order: the images were made at eta 1.3 (skin1's sigma_s' in red is 0.74 /mm),
+    # so only the first row recovers it.
+    fitted = [float(row["sigma_s_prime_R"]) for row in rows]
+    assert abs(fitted[0] / 0.74 - 1) < 0.02 and abs(fitted[1] / 0.74 - 1) > 0.05, fitted
 
 
 @pytest.mark.parametrize(
