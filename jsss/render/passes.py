@@ -8,6 +8,7 @@ turns any spelling a user may type (``normal-filtering`` on a command line) into
 from __future__ import annotations
 
 import enum
+import re
 
 __all__ = ["Method", "Pass"]
 
@@ -22,9 +23,9 @@ class Method(enum.StrEnum):
 
     @classmethod
     def _missing_(cls, value):
-        """Command-line spellings: ``normal-filtering``, ``texture_space``, any case."""
+        """Other spellings: ``normal-filtering``, ``texture_space``, ``Texture Space``, any case."""
         if isinstance(value, str):
-            wanted = value.strip().lower().replace("_", "-")
+            wanted = re.sub(r"[\s_-]+", "-", value.strip().lower())
             for member in cls:
                 if member.value.replace(" ", "-") == wanted:
                     return member

@@ -90,3 +90,18 @@ def test_render_runs_the_plans_configuration(scene):
     assert method_config("image-space", samples=4) == ImageSpace(4)
     with pytest.raises(ValueError, match="samples"):
         method_config("image-space", samples=0)
+
+
+@pytest.mark.parametrize("spelling, member", [
+    ("normal filtering", "NORMAL_FILTERING"), ("normal-filtering", "NORMAL_FILTERING"),
+    ("Normal Filtering", "NORMAL_FILTERING"), ("texture_space", "TEXTURE_SPACE"), ("texture space", "TEXTURE_SPACE"),
+    ("IMAGE-SPACE", "IMAGE_SPACE"), (" lambert ", "LAMBERT")])
+def test_a_method_is_read_from_any_spelling_a_user_types(spelling, member):
+    """The scene file's, the command line's (no spaces) and a person's (any case) spellings name one member."""
+    assert Method(spelling) is Method[member]
+
+
+@pytest.mark.parametrize("spelling", ["normal", "texturespace", "image space sampling", ""])
+def test_an_unknown_method_is_refused(spelling):
+    with pytest.raises(ValueError):
+        Method(spelling)
