@@ -12,5 +12,6 @@ command            what it does                                module
 
 Each module's ``main(argv=None)`` is its console script and returns the exit status (0; 1 for
 a batch with failed rows; 2 for bad input, reported in one line; 130 when interrupted).
-Nothing is imported here, so that ``--help`` and ``--version`` start without JAX.
+Nothing is imported here, so that ``fit-params --help`` and ``--version`` start without JAX
+(``jsss-render --help`` lists the methods of :class:`jsss.render.Method`, which loads JAX: about 2 s).
 """

@@ -27,7 +27,7 @@ import time
 import warnings
 from pathlib import Path
 
-__all__ = ["Progress", "UsageError", "add_commands", "cache_dir", "compilation_cache_dir", "enable_caches",
+__all__ = ["Progress", "UsageError", "add_commands", "cache_dir", "compilation_cache_dir", "enable_caches", "float64",
            "error_line", "exit_status", "fit_grid", "start", "version", "write_atomically", "write_text"]
 
 
@@ -98,14 +98,28 @@ def enable_caches(*, spectra: bool = False) -> Path | None:
     return path
 
 
-@functools.lru_cache(maxsize=None)
-def start(*, spectra: bool = False) -> None:
-    """A command's JAX: float64 and the caches (:func:`enable_caches`), once per process (a
-    batch worker calls it for every image)."""
+def float64() -> None:
+    """Turn on float64 (``jax_enable_x64``) for this process: commands compute in it."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    enable_caches(spectra=spectra)
+
+
+def start(*, spectra: bool = False) -> None:
+    """A command's JAX: float64 and the caches (:func:`enable_caches`), turned on once per
+    process (a batch worker calls it for every image); ``spectra`` also keeps the renderer's
+    Laplacian spectra on disk."""
+    _start_once()
+    if spectra:
+        from jsss.render.normal_filter import keep_spectra_in
+
+        keep_spectra_in(cache_dir())
+
+
+@functools.lru_cache(maxsize=1)
+def _start_once() -> None:
+    float64()
+    enable_caches()
 
 
 @functools.lru_cache(maxsize=None)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._console import exit_status, version
+from ._console import exit_status, float64, version
 
 __all__ = ["info_lines", "main", "parser"]
 
@@ -13,9 +13,7 @@ PROG = "jsss"
 
 
 def _table(args) -> int:
-    import jax
-
-    jax.config.update("jax_enable_x64", True)
+    float64()
     import numpy as np
 
     from jsss.diffusion.dipole import total_reflectance
