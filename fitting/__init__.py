@@ -1,4 +1,5 @@
-"""fitting: iterative fits of jsss models to data (Gaussian sums, medium parameters).
+"""fitting: iterative fits of jsss models to data (Gaussian sums, medium parameters, a material from a photo)
+and the statistics they share (:mod:`fitting.statistics`).
 
 The names below load their module on first use: ``fit-params`` needs only
 :mod:`fitting.medium`, and importing the renderer behind :func:`fit_render` cost it 0.7 s.
@@ -14,6 +15,9 @@ _HOME = {
     "fit_gaussians_to_medium": "gaussians",
     "jensen2001_profiles": "gaussians",
     "radial_grid": "gaussians",
+    "MediumFit": "medium",
+    "fit_medium": "medium",
+    "RenderFitError": "render",
 }
 
 __all__ = sorted(_HOME)

@@ -29,7 +29,7 @@ def observable(model, g, view_cos, medium, k, grid_r, fixed=None):
 
     For the dipole the values are the Hankel spectrum on ``k`` (closed form); for transport
     the profile on ``grid_r`` (the forward transform is folded into the fit's precomputed
-    operators, :func:`fit_medium`). The observable is the exitance per unit entering flux
+    operators, :func:`fitting.medium.fit_medium`). The observable is the exitance per unit entering flux
     (``view_cos`` None), or the camera's radiance factor :math:`\pi (1 - F(0)) L(r, \theta)`:
     radiance toward the camera per unit *incident* flux, times pi (what a white-reference
     calibration of a camera image gives). ``fixed``: the transport tables already at the

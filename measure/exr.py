@@ -1,4 +1,4 @@
-"""OpenEXR images in and out, with errors that name the file (used by measure/ and the renderer).
+"""OpenEXR images in and out, with errors that name the file (used by measure/ and the render command).
 
 Images are float arrays of shape ``(H, W, C)`` with named channels (``("R", "G", "B")``
 or ``("Y",)``). Pixels are stored as ``"float"`` (32-bit) or ``"half"`` (16-bit).

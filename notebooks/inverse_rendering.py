@@ -11,7 +11,7 @@
 # %% [markdown]
 # # A material from a photo: inverse rendering
 #
-# Beam-profile measurements (`measure_and_fit.ipynb`) need a laser and a dark room. Often what
+# Beam-profile measurements (`measure_and_fit.py`) need a laser and a dark room. Often what
 # you have is a photo of an object -- a marble sphere, a bar of soap -- under a light you know.
 # If the scene's geometry, camera and lights are known, the material can be fitted to the photo
 # through the renderer: jsss's texture-space renderer is a smooth function of sigma_a and
@@ -48,7 +48,7 @@ from jsss.render.shading import tone_map
 
 FAST = os.environ.get("JSSS_FULL") != "1"   # JSSS_FULL=1: a 160 x 120 photo (see notebooks/README.md)
 size = (64, 48) if FAST else (160, 120)
-examples = os.path.join(os.path.dirname(os.path.abspath("inverse_rendering.ipynb")), "..", "examples")
+examples = os.path.join(os.getcwd(), "..", "examples")
 scene = load_scene(os.path.join(examples, "marble_sphere.toml"))
 scene = replace(scene, camera=replace(scene.camera, width=size[0], height=size[1]),
                 texture_size=128 if FAST else 256)

@@ -44,7 +44,7 @@ points = 40_000 if FAST else 300_000
 # three image-space sample counts stay, for the 1/sqrt(N) plot below
 variants = [v for v in VARIANTS if not FAST or v[0] in (Method.LAMBERT, Method.IMAGE_SPACE)
             or v[1] in ({"normal_filter": "spectral"}, {"accuracy": 0.05})]
-examples = os.path.join(os.path.dirname(os.path.abspath("methods.ipynb")), "..", "examples")
+examples = os.path.join(os.getcwd(), "..", "examples")
 
 # %% [markdown]
 # ## Every method on the marble sphere and the ketchup plane

@@ -34,7 +34,7 @@ from jsss.render.shading import tone_map
 FAST = os.environ.get("JSSS_FULL") != "1"   # JSSS_FULL=1: the full size (see notebooks/README.md)
 size = (96, 72) if FAST else (320, 240)
 texture = 128 if FAST else 512
-examples = os.path.join(os.path.dirname(os.path.abspath("render.ipynb")), "..", "examples")
+examples = os.path.join(os.getcwd(), "..", "examples")
 
 # %% [markdown]
 # ## The example scenes and their plans
@@ -78,7 +78,7 @@ for ax, (name, image) in zip(axes, images.items()):
 #
 # The same marble sphere from 200 m: the profile's RMS radius (about 5 mm) is smaller than a
 # pixel's footprint, so the planner picks Lambert shading with the profile's total albedo
-# (its calibration table, see `methods.ipynb`, predicts the smallest cost at the target).
+# (its calibration table, see `methods.py`, predicts the smallest cost at the target).
 
 # %%
 scene = load_scene(os.path.join(examples, "marble_sphere.toml"))

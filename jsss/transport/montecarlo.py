@@ -64,7 +64,7 @@ class MonteCarloResult:
 
 def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=None, eta_bottom=None,
                 n_photons: int = 100_000, batch_size: int = 4096, max_steps: int = 1_000_000, bin_edges=None,
-                seed: int = 0, progress: bool | None = None, cos_incident: float = 1.0) -> MonteCarloResult:
+                seed: int = 0, progress: bool = False, cos_incident: float = 1.0) -> MonteCarloResult:
     """Run the random walk for a single-channel medium.
 
     Parameters
@@ -90,8 +90,9 @@ def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=No
         Radial bins (default: 64 log-spaced edges from 0.01 to 100 mean free paths, plus 0
         and infinity so every exiting photon is in a bin).
     seed : int, keyword-only
-    progress : bool, optional, keyword-only
-        Print a progress line per batch to stderr (default: when more than 4 batches).
+    progress : bool, keyword-only
+        Print a progress line per batch to stderr (default False: the library prints nothing
+        unless asked).
     cos_incident : float in (0, 1], keyword-only
         Cosine of the beam's direction to the normal *outside* (default 1: along the normal).
         It refracts into the medium; every result stays per unit *entering* flux (the entry
@@ -117,7 +118,7 @@ def random_walk(medium: Medium, *, thickness=jnp.inf, g: float = 0.0, eta_top=No
 def random_walk_layers(layers, base: Medium | None = None, *, g: float = 0.0, eta_above: float = 1.0,
                        eta_below: float = 1.0, n_photons: int = 100_000, batch_size: int = 4096,
                        max_steps: int = 1_000_000, bin_edges=None, seed: int = 0,
-                       progress: bool | None = None) -> MonteCarloResult:
+                       progress: bool = False) -> MonteCarloResult:
     """Random walk through a stack of :class:`jsss.layers.Layer` (top first), over an optional
     semi-infinite ``base``. Each ``medium.eta`` is the layer's absolute index; photons refract
     (Snell) and reflect (Fresnel) at every interface. Other options as :func:`random_walk`.

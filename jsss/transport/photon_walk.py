@@ -285,15 +285,15 @@ def _advance(lanes: _Lane, next_id, issue_limit, n_photons, key, params, max_ste
 
 
 def run_walk(params, *, n_photons: int, lanes: int = 4096, max_steps: int = 2000, max_path=np.inf, seed: int = 0,
-             progress: bool | None = None, label: str = "random_walk") -> WalkRecords:
+             progress: bool = False, label: str = "random_walk") -> WalkRecords:
     """Walk ``n_photons`` photons through the stack described by ``params``; one record each.
 
     ``params`` = (sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below), per layer
     arrays of one dtype (see :mod:`jsss.transport.montecarlo`), optionally followed by the cosine at which
     photons start inside (an oblique beam after refraction; default 1, along the normal). A
     photon still inside after ``max_steps`` events or ``max_path`` [mm] of path is recorded as
-    lost (side 0). Progress
-    is printed to stderr when ``progress`` (default: runs of more than 64 photons per lane).
+    lost (side 0). With ``progress`` a line per chunk goes to stderr (a script's choice: the
+    library prints nothing by default).
     """
     dtype = params[0].dtype
     n_photons = int(n_photons)
@@ -303,7 +303,7 @@ def run_walk(params, *, n_photons: int, lanes: int = 4096, max_steps: int = 2000
     key = (jnp.uint32(seed & 0xFFFFFFFF), jnp.uint32((seed >> 32) & 0xFFFFFFFF))
     count = jnp.int32(n_photons)
     max_steps, max_path = jnp.int32(max_steps), jnp.asarray(max_path, dtype)
-    shown = progress if progress is not None else n_photons > 64 * lanes
+    shown = bool(progress)
     state = jax.vmap(_fresh, in_axes=(0, None, None))(jnp.full(lanes, n_photons, jnp.int32), dtype,
                                                       _start_cosine(params))  # all idle
     next_id, issued, done = jnp.int32(0), 0, 0
