@@ -254,8 +254,8 @@ def chandrasekhar_check(mi, *, albedo=0.18 / 0.241, spp=4096, chunks=2):
         scene = dataclasses.replace(scene, material=dataclasses.replace(scene.material, profile_model="transport"))
         ours = []
         for oblique in (False, True):
-            plan = plan_scene(scene, method="lambert", accuracy=0.01).replace("specular", False, "subsurface only")
-            plan = plan.replace("single scattering", True, "check").replace("oblique incidence", oblique, "check")
+            plan = plan_scene(scene, method="lambert", accuracy=0.01).replace(Pass.SPECULAR, False, "subsurface only")
+            plan = plan.replace(Pass.SINGLE_SCATTERING, True, "check").replace(Pass.OBLIQUE_INCIDENCE, oblique, "check")
             frame = np.asarray(render(scene, plan, dtype=jnp.float64).radiance)
             ours.append(float(frame[..., 0].mean()) / np.cos(light))
         rows.append((view_deg, light_deg, float(np.mean(means)), exact, float(np.std(means, ddof=1) / np.sqrt(chunks)),
@@ -280,7 +280,7 @@ def main(argv=None):
     parser.add_argument("--scenes", nargs="*", default=["marble_sphere", "ketchup_plane"])
     parser.add_argument("--profiles", nargs="*", default=["dipole", "transport"], choices=["dipole", "transport"],
                         help="jsss profile models to compare (the path tracer runs once for all)")
-    parser.add_argument("--methods", nargs="*", default=["lambert", "normal filtering", "image-space", "texture-space"])
+    parser.add_argument("--methods", nargs="*", default=[m.value for m in Method])
     parser.add_argument("--variant", default="auto", choices=["auto", "llvm_ad_rgb", "scalar_rgb"],
                         help="Mitsuba variant (auto: LLVM where it runs, else scalar)")
     parser.add_argument("--chunks", type=int, default=None, help="independent seeds (default 8; --quick 2)")
@@ -329,7 +329,7 @@ def main(argv=None):
             print("|---|---|---|---:|---:|---:|---:|---:|---:|")
             runs = [(method, profile, ()) for profile in args.profiles for method in args.methods]
             # What the two passes for slanted and nearby light change, on the best configuration.
-            runs.append(("texture-space", "transport", ("oblique incidence", "deposit depth")))
+            runs.append((Method.TEXTURE_SPACE, "transport", (Pass.OBLIQUE_INCIDENCE, Pass.DEPOSIT_DEPTH)))
             for method, profile, off in runs:
                 material = dataclasses.replace(scene.material, profile_model=profile)
                 ours, passes = _ours(dataclasses.replace(scene, material=material), method, off=off)

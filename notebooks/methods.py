@@ -96,7 +96,7 @@ fig.colorbar(error_map, ax=axes[1::2, 1:].ravel().tolist(), shrink=0.8,
 
 # %%
 reference, frames = results["marble_sphere"]
-image = [f.row for f in frames if f.row.method == "image-space"]
+image = [f.row for f in frames if f.row.method == Method.IMAGE_SPACE]
 spp = np.array([int(r.knob.split()[0]) for r in image])
 error = np.array([r.error for r in image])
 slope = np.polyfit(np.log(spp), np.log(error), 1)[0]
