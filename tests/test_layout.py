@@ -132,7 +132,8 @@ def test_library_code_below_the_commands_holds_no_argument_parser(package):
 
 
 def test_method_and_pass_names_are_compared_only_through_the_enumeration():
-    """No ``== "texture-space"``, ``plan.on("diffusion")`` or similar outside jsss/render/passes.py."""
+    """No ``== "texture-space"``, ``plan.on("diffusion")`` or similar outside jsss/render/passes.py
+    (the packages, the benchmarks, the scripts and the notebooks)."""
     from jsss.render.passes import Method, Pass
 
     def alternatives(names):
@@ -147,7 +148,9 @@ def test_method_and_pass_names_are_compared_only_through_the_enumeration():
     assert pattern.search('if plan.on("single scattering"):') and pattern.search('method != "normal-filtering"')
     assert not pattern.search('if white_balance == "camera":')
     found = []
-    for name, (path, _) in MODULES.items():
+    sources = [path for path, _ in MODULES.values()] + sorted(
+        path for folder in ("benchmarks", "scripts", "notebooks") for path in (ROOT / folder).glob("*.py"))
+    for path in sources:
         if path.name == "passes.py":
             continue
         for number, line in enumerate(path.read_text().splitlines(), 1):
