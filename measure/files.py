@@ -107,10 +107,12 @@ def read_measurement(measurement, reference, *, dark=None, saturation: float | N
         raise ValueError(f"{_name(names, 'measurement')}: give at least one image")
     merged = len(paths) > 1
     # Merged brackets are per unit exposure with the dark frame already subtracted.
-    meas = (_merge_brackets(paths, saturation, dark, white_balance, names) if merged
-            else read_image(paths[0], white_balance=white_balance))
+    if merged:  # the dark frame is read once, here, and its pixels also go into the merge
+        meas, dark_image = _merge_brackets(paths, saturation, dark, white_balance, names)
+    else:
+        meas = read_image(paths[0], white_balance=white_balance)
+        dark_image = None if dark is None else read_image(dark, meas.channels, white_balance=white_balance)
     ref = read_image(reference, meas.channels, white_balance=white_balance)
-    dark_image = None if dark is None else read_image(dark, meas.channels, white_balance=white_balance)
     for image in [ref] + ([dark_image] if dark_image else []):
         if image.pixels.shape != meas.pixels.shape:
             raise MeasurementError(f"{image.path}: shape {image.pixels.shape} differs from {meas.path} "
@@ -129,9 +131,10 @@ def read_measurement(measurement, reference, *, dark=None, saturation: float | N
                              None if pixel_mm is None else float(pixel_mm), Path(meas.path), Path(ref.path))
 
 
-def _merge_brackets(paths: Sequence, saturation, dark, white_balance, names) -> ExrImage:
+def _merge_brackets(paths: Sequence, saturation, dark, white_balance, names) -> tuple:
     """Read exposure brackets (exposure time from each file's metadata: the EXR attribute
-    ``jsss_exposure``, a raw or TIFF file's exposure time x ISO / 100) and merge them."""
+    ``jsss_exposure``, a raw or TIFF file's exposure time x ISO / 100) and merge them.
+    Returns the merged image and the dark frame's image (None without one), read once."""
     from .photo import read_image
     from .profile import merge_brackets
 
@@ -146,10 +149,12 @@ def _merge_brackets(paths: Sequence, saturation, dark, white_balance, names) -> 
             raise MeasurementError(f"several measurement frames need {_name(names, 'saturation')} (the clip level "
                                    "of a frame)")
         saturation = levels.pop()  # raw and integer files know their clip level
-    dark_pixels = None if dark is None else read_image(dark, frames[0].channels, white_balance=white_balance).pixels
+    dark_image = None if dark is None else read_image(dark, frames[0].channels, white_balance=white_balance)
     merged = merge_brackets([f.pixels for f in frames], [f.header["jsss_exposure"] for f in frames],
-                            saturation=saturation, dark=dark_pixels, names=[str(f.path) for f in frames])
-    return ExrImage(merged, frames[0].channels, {**frames[0].header, "jsss_merged": True}, frames[0].path)
+                            saturation=saturation, dark=None if dark_image is None else dark_image.pixels,
+                            names=[str(f.path) for f in frames])
+    return (ExrImage(merged, frames[0].channels, {**frames[0].header, "jsss_merged": True}, frames[0].path),
+            dark_image)
 
 
 def _check_clipping(image: ExrImage) -> None:

@@ -182,6 +182,24 @@ def exit_status(prog: str, command, *args) -> int:
 
 
 # ----------------------------------------------------------------------------- files
+def _read_umask() -> int:
+    """The process's umask. Linux reports it in /proc; elsewhere setting and restoring it is the
+    only way, which is process-wide: done once, at import, before any batch starts threads."""
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    umask = os.umask(0o022)
+    os.umask(umask)
+    return umask
+
+
+_UMASK = _read_umask()  # read once: toggling os.umask per file would race with other threads
+
+
 def write_atomically(out, write) -> Path:
     """``write(tmp_path)`` to a temporary file beside ``out``, then rename it to ``out``: readers
     see the old file or the whole new one, never a part, and a failure leaves no temporary
@@ -192,9 +210,7 @@ def write_atomically(out, write) -> Path:
     os.close(fd)
     try:
         write(tmp)
-        umask = os.umask(0)  # mkstemp makes the file private (0600); a table or an image is not
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes the file private (0600); a table or an image is not
         os.replace(tmp, out)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

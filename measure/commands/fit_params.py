@@ -161,28 +161,37 @@ def _fit(args) -> int:
         raise UsageError("give a MEASUREMENT.exr (with --reference), or --demo, or 'batch'")
     if not args.reference:
         raise UsageError("--reference REF.exr is required (or use --demo)")
-    from measure.files import fit_images, read_measurement
-
     say(f"reading {len(args.measurement)} frame(s), the reference{' and the dark frame' if args.dark else ''}")
-    images = read_measurement(args.measurement, args.reference, dark=args.dark, saturation=args.saturation,
-                              white_balance=args.white_balance, names=OPTION_NAMES)
+    fit = _read_and_fit(args.measurement, args.reference, dark=args.dark, saturation=args.saturation,
+                        white_balance=args.white_balance)
 
-    def fit(model):
-        return fit_images(images, args.eta, pixel_mm=args.pixel_mm, reference_reflectance=args.reference_reflectance,
-                          model=model, g=args.g, view_angle_deg=_view_angle(args), grid=fit_grid(),
-                          names=OPTION_NAMES)
+    def fit_model(model):
+        return fit(args.eta, pixel_mm=args.pixel_mm, reference_reflectance=args.reference_reflectance, model=model,
+                   g=args.g, view_angle_deg=_view_angle(args))
 
     start()
     say(f"fitting {args.model} (the first fit compiles: 10-20 s)")
-    result = fit(args.model)
-    comparison = _dipole_bias(result, lambda: fit("transport")) if args.model == "dipole" else None
+    result = fit_model(args.model)
+    comparison = _dipole_bias(result, lambda: fit_model("transport")) if args.model == "dipole" else None
     _report(result, args, extra=comparison, stem=Path(args.measurement[0]).stem)
     return 0
 
 
+def _read_and_fit(measurement, reference, **read_options):
+    """Read a measurement (:func:`measure.files.read_measurement`) and return ``fit(eta, **options)``,
+    which fits it (:func:`measure.files.fit_images`) on the shared grid; messages name the options."""
+    from measure.files import fit_images, read_measurement
+
+    images = read_measurement(measurement, reference, names=OPTION_NAMES, **read_options)
+
+    def fit(eta, **options):
+        return fit_images(images, eta, grid=fit_grid(), names=OPTION_NAMES, **options)
+
+    return fit
+
+
 def _demo(args, say) -> int:
     from jsss.materials import jensen2001
-    from measure.files import fit_images, read_measurement
     from measure.synth import synthesize, write_measurement
 
     start()
@@ -201,9 +210,8 @@ def _demo(args, say) -> int:
             print(f"demo: synthetic camera image of marble (transport tables, 256 x 256 px, 0.05 mm pixels, "
                   f"Gaussian beam 0.05 mm, shot and read noise) {where}")
         say(f"fitting {args.model} (the first fit compiles: 10-20 s)")
-        images = read_measurement(paths["measurement"], paths["reference"], dark=paths.get("dark"), names=OPTION_NAMES)
-        result = fit_images(images, 1.5, model=args.model, g=args.g, view_angle_deg=_view_angle(args),
-                            grid=fit_grid(), names=OPTION_NAMES)
+        fit = _read_and_fit(paths["measurement"], paths["reference"], dark=paths.get("dark"))
+        result = fit(1.5, model=args.model, g=args.g, view_angle_deg=_view_angle(args))
     _report(result, args, truth=synthetic.truth, stem="marble")
     return 0
 
@@ -341,7 +349,8 @@ def _find_jobs(target, manifest):
         with manifest.open(newline="") as handle:
             reader = csv.DictReader(handle)
             if not reader.fieldnames or not {"measurement", "reference"} <= set(reader.fieldnames):
-                raise UsageError(f"{manifest}: needs columns measurement,reference[,dark,pixel_mm,eta,reference_reflectance]")
+                raise UsageError(f"{manifest}: needs columns "
+                                 "measurement,reference[,dark,pixel_mm,eta,reference_reflectance]")
             for row in reader:
                 base = manifest.parent
                 overrides = {k: float(row[k]) for k in ("pixel_mm", "eta", "reference_reflectance") if row.get(k)}
@@ -376,20 +385,14 @@ def _fit_row(job, options) -> dict:
 
     A plain function of picklable arguments, so that it runs the same in this process or on
     a Dask worker (where the compiled fit and the grid stay warm between images)."""
-    from measure.files import fit_images, read_measurement
-
     start()
     measurement, reference, dark, overrides = job
     row = {"file": str(measurement), "status": "ok", "error": "", "warnings": ""}
     try:
-        images = read_measurement(measurement, reference, dark=dark, white_balance=options["white_balance"],
-                                  names=OPTION_NAMES)
-        result = fit_images(images, overrides.get("eta", options["eta"]),
-                            pixel_mm=overrides.get("pixel_mm", options["pixel_mm"]),
-                            reference_reflectance=overrides.get("reference_reflectance",
-                                                                options["reference_reflectance"]),
-                            model=options["model"], g=options["g"], view_angle_deg=options["view_angle_deg"],
-                            grid=fit_grid(), names=OPTION_NAMES)
+        fit = _read_and_fit(measurement, reference, dark=dark, white_balance=options["white_balance"])
+        result = fit(overrides.get("eta", options["eta"]), pixel_mm=overrides.get("pixel_mm", options["pixel_mm"]),
+                     reference_reflectance=overrides.get("reference_reflectance", options["reference_reflectance"]),
+                     model=options["model"], g=options["g"], view_angle_deg=options["view_angle_deg"])
         table = result.table()
         for key in _ROW_KEYS:
             for ch, value in zip(table["channels"], table[key]):

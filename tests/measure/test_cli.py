@@ -103,7 +103,8 @@ def test_batch_writes_every_row_atomically_and_reports_failures(serial_batch):
     rows = list(csv.DictReader(out_csv.open()))
     assert len(rows) == 3
     status = {r["file"].split("/")[-1]: r for r in rows}
-    assert status["orphan.exr"]["status"] == "failed" and "orphan_ref.exr: no such file" in status["orphan.exr"]["error"]
+    assert status["orphan.exr"]["status"] == "failed"
+    assert "orphan_ref.exr: no such file" in status["orphan.exr"]["error"]
     for name, medium in (("skin1.exr", jensen2001("skin1")), ("apple.exr", jensen2001("apple"))):
         assert status[name]["status"] == "ok"
         estimate = [float(status[name][f"sigma_a_{c}"]) for c in "RGB"]
@@ -222,7 +223,8 @@ def test_demo_keeps_its_images_with_keep(tmp_path):
     the kept files fit again from the command line; --keep without --demo is refused."""
     out = run("--demo", "--keep", tmp_path / "demo")
     assert out.returncode == 0, out.stderr
-    assert {"marble.exr", "marble_ref.exr", "marble_dark.exr", "marble.json"} <= {p.name for p in (tmp_path / "demo").iterdir()}
+    written = {p.name for p in (tmp_path / "demo").iterdir()}
+    assert {"marble.exr", "marble_ref.exr", "marble_dark.exr", "marble.json"} <= written
     assert str(tmp_path / "demo") in out.stdout
     alone = run(tmp_path / "demo" / "marble.exr", "--keep", tmp_path / "x")
     assert alone.returncode == 2 and "--keep DIR goes with --demo" in alone.stderr
