@@ -4,7 +4,10 @@ Four methods, each an immutable configuration (:mod:`jsss.render.methods`): ``La
 ``NormalFiltering`` (Patro 2007), ``ImageSpace`` integration with exact dipole sampling
 (Mertens 2003) and ``TextureSpace`` diffusion (d'Eon 2007 sec. 5). ``load_scene`` reads a
 TOML scene, ``plan_scene`` chooses the method (from the measured calibration table) and the
-passes and says why, ``render`` runs them. Frames are pure JAX functions of the material and
+passes and says why, ``render`` runs them. A material may vary over the surface
+(``[material.maps]``: a colour map by d'Eon's texturing rules, parameter maps blended from a
+few basis profiles; :mod:`jsss.render.surface_maps`, :mod:`jsss.render.profile_blend`).
+Frames are pure JAX functions of the material and
 the lights, so they are differentiable in both; ``linear_frame`` keeps a texture-space frame
 as the weighted sum of fixed blurs that a fit solves with; ``reference_radiance`` is the
 brute-force surface integral they are measured against. Imports nothing from :mod:`fitting`
@@ -20,12 +23,15 @@ from .passes import Method, Pass
 from .planner import Plan, PassDecision, deposit_change, method_config, plan_scene
 from .renderer import RenderParams, RenderResult, frame_program, prepare, render, render_image, render_params
 from .reference import reference_radiance
+from .profile_blend import ProfileBasis, choose_basis
 from .scene import Material, Scene, SceneError, load_scene, parse_scene
+from .surface_maps import MapParams, SurfaceMaps
 
 __all__ = [
-    "ImageSpace", "Lambert", "LinearFrame", "Material", "Mesh", "Method", "NormalFiltering", "Pass", "PassDecision",
-    "PixelPrepared", "Plan", "RenderMethod", "RenderParams", "RenderResult", "SampledProfile", "Scene", "SceneError",
-    "TexturePrepared", "TextureSpace", "box", "camera_buffers", "deposit_change", "distance_to_rim", "fin",
-    "frame_program", "image_space_exitance", "linear_frame", "load_obj", "load_scene", "method_config", "parse_scene",
-    "plan_scene", "plane", "prepare", "reference_radiance", "render", "render_image", "render_params", "uv_sphere",
+    "ImageSpace", "Lambert", "LinearFrame", "MapParams", "Material", "Mesh", "Method", "NormalFiltering", "Pass",
+    "PassDecision", "PixelPrepared", "Plan", "ProfileBasis", "RenderMethod", "RenderParams", "RenderResult",
+    "SampledProfile", "Scene", "SceneError", "SurfaceMaps", "TexturePrepared", "TextureSpace", "box",
+    "camera_buffers", "choose_basis", "deposit_change", "distance_to_rim", "fin", "frame_program",
+    "image_space_exitance", "linear_frame", "load_obj", "load_scene", "method_config", "parse_scene", "plan_scene",
+    "plane", "prepare", "reference_radiance", "render", "render_image", "render_params", "uv_sphere",
 ]

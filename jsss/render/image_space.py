@@ -61,9 +61,9 @@ import numpy as np
 from scipy.integrate import trapezoid as _trapezoid
 
 from ..diffusion import dipole
+from ..diffusion.sampling import sample_dipole_radius
 from ..medium import Medium
 from ..numerics import is_concrete, safe_sqrt
-from ..diffusion.sampling import sample_dipole_radius
 from .mesh import Mesh
 from .raster import PerspectiveView, Raster, antialiased_raster, surface_attributes
 
@@ -267,7 +267,8 @@ def sample_pattern(samples: int, uniform_fraction: float, shape: tuple[int, int]
 
 
 def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuffers, *, samples: int = 32,
-                         uniform_fraction: float = 0.25, disc_radius: float | None = None, seed: int = 0):
+                         uniform_fraction: float = 0.25, disc_radius: float | None = None, seed: int = 0,
+                         entry_blend=None):
     r"""Exitance :math:`M(x)` (H, W, C) at every visible pixel by Mertens' image-space integration.
 
     Parameters
@@ -286,6 +287,12 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
         Radius :math:`R'` of that disc; default :func:`profile_radius` (95 % of the light).
     seed : int
         Picks the pattern's offset at each pixel.
+    entry_blend : tuple, optional
+        ``(coefficients (H, W, K, C), node_weights (K, n, C), variances (n,))``: a material whose
+        profile varies over the surface (:mod:`jsss.render.profile_blend`). Each sample's profile
+        then has the parameters at its entry point :math:`p` (Mertens sec. 5; Jensen 2001's
+        rule), :math:`\sum_k a_k(p)\sum_i W_{k,i} G(v_i, |x - p|)`; the samples are still drawn
+        from ``profile`` (any density that covers the profile keeps the estimate unbiased).
 
     Returns
     -------
@@ -305,6 +312,8 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
                              "(under jit or grad); profile_radius(profile) gives the default.")
         disc_radius = profile_radius(profile)
     base, importance, offsets, n_imp, n_uni = sample_pattern(samples, uniform_fraction, (H, W), seed=seed)
+    if entry_blend is not None:
+        coefficients, node_weights, blend_variances = (jnp.asarray(a, dtype) for a in entry_blend)
 
     def const(a):
         return jnp.asarray(a, dtype)
@@ -368,7 +377,13 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
         distance = safe_sqrt(jnp.sum((x - p) ** 2, -1))
         q = n_imp * profile.density(r) + jnp.where(r <= R, n_uni / (jnp.pi * R**2), 0.0)
         weight = jnp.where(valid, jacobian / jnp.where(valid, q, 1.0), 0.0)
-        value = profile(distance) * irradiance[iy, ix] * weight[..., None]
+        if entry_blend is None:
+            at_distance = profile(distance)
+        else:
+            gaussians = jnp.exp(-distance[..., None] ** 2 / (2 * blend_variances)) / (2 * jnp.pi * blend_variances)
+            per_node = jnp.einsum("...i,kic->...kc", gaussians, node_weights)
+            at_distance = (coefficients[iy, ix] * per_node).sum(-2)
+        value = at_distance * irradiance[iy, ix] * weight[..., None]
         return total + jnp.where(valid[..., None], value, 0.0), None
 
     total, _ = jax.lax.scan(step, jnp.zeros(irradiance.shape, dtype), (const(base), jnp.asarray(importance)))

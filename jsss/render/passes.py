@@ -44,6 +44,7 @@ class Pass(enum.StrEnum):
     IRRADIANCE = "irradiance"
     SHADOWS = "shadows"
     LAYERED_PROFILE = "layered profile"
+    SURFACE_MAPS = "surface maps"
     NORMAL_FILTERING = "normal filtering"
     IMAGE_SPACE_INTEGRATION = "image-space integration"
     DIFFUSION = "diffusion"

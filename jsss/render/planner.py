@@ -52,13 +52,27 @@ import numpy as np
 
 from ..diffusion.incidence import deposit_depth, incidence_ratio, point_light_loss
 from ..diffusion.single_scattering import single_scattering_share
-from .calibration import (METHODS, FrameFeatures, choose_method, estimate_methods, knob_label, load_calibration,
-                          parse_knob)
+from .calibration import (
+    METHODS,
+    FrameFeatures,
+    choose_method,
+    estimate_methods,
+    knob_label,
+    load_calibration,
+    parse_knob,
+)
 from .lighting import light_geometry, shadow_map
 from .mesh import distance_to_surface, is_closed
-from .methods import CONFIGURATIONS, ImageSpace, NormalFiltering, RenderMethod, TextureSpace
+from .methods import (
+    CONFIGURATIONS,
+    ImageSpace,
+    NormalFiltering,
+    RenderMethod,
+    TextureSpace,
+)
 from .passes import Method, Pass
-from .profiles import choose_variances, full_profile
+from .profile_blend import ProfileBasis, choose_basis
+from .profiles import choose_variances, full_profile, render_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
 
@@ -95,6 +109,8 @@ class Plan:
     blur_pixels : float, the profile's RMS radius over the pixel footprint
     knob : str, the chosen knob as the calibration table labels it (``"32 spp"``, ...)
     features : FrameFeatures, what the method's predicted error rests on (:func:`frame_features`)
+    basis : ProfileBasis or None, the basis profiles a material's parameter maps are blended
+        from (:mod:`jsss.render.profile_blend`); ``variances`` are then the basis'
 
     ``method`` (the :class:`~jsss.render.passes.Method`) and the knobs ``texture_size``,
     ``taps``, ``max_ratio``, ``samples`` and ``normal_filter`` read the configuration (None
@@ -111,6 +127,7 @@ class Plan:
     blur_pixels: float = 0.0
     knob: str = ""
     features: FrameFeatures | None = None
+    basis: ProfileBasis | None = None
 
     @property
     def method(self) -> Method:
@@ -292,8 +309,18 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     decisions = {Pass.IRRADIANCE: (True, f"{len(scene.lights)} light(s) with Fresnel transmittance"),
                  Pass.SHADOWS: (True, "shadow map per light"),
                  Pass.CAMERA: (True, "rasterize, look up, tone map")}
-    gs, error, reached = choose_variances(material, texture_target / 2)
-    variances, w = np.asarray(gs.variances), np.asarray(gs.weights)
+    maps = material.maps
+    basis = None
+    if maps is not None and maps.parametric:
+        # Half the profile's budget to the Gaussians, half to blending between the basis profiles.
+        basis = choose_basis(material, maps.sigma_a, maps.sigma_s_prime, texture_target / 4)
+        variances = basis.variances
+        w = np.asarray(render_profile(material, variances).weights, float)
+        error, reached = basis.fit_error + basis.error, basis.fit_error <= texture_target / 4
+    else:
+        gs, error, reached = choose_variances(material, texture_target / 2)
+        variances, w = np.asarray(gs.variances), np.asarray(gs.weights)
+    decisions[Pass.SURFACE_MAPS] = _maps_decision(material, basis, method)
     total = w.sum(0)
     if material.layers:
         decisions[Pass.LAYERED_PROFILE] = (True, f"{len(material.layers)} layers"
@@ -341,7 +368,24 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     config = method_config(method, texture_size=size, taps=7, max_ratio=2.0 if texture_target < 0.15 else 4.0,
                            samples=samples, normal_filter=normal_filter)
     return Plan(ordered, variances, error, config, pixel, method_why=method_why, estimates=estimates, blur_pixels=blur,
-                knob=knob, features=features)
+                knob=knob, features=features, basis=basis)
+
+
+def _maps_decision(material, basis, method):
+    """Whether the material varies over the surface, how, and what it costs."""
+    maps = material.maps
+    if maps is None:
+        return False, "homogeneous material (no [material.maps])"
+    why = maps.describe()
+    if basis is not None:
+        extra = {Method.TEXTURE_SPACE: f"the diffusion blurs {basis.size}x the channels",
+                 Method.IMAGE_SPACE: f"each sample evaluates {basis.size} profiles at its entry point",
+                 Method.LAMBERT: "the total albedo per pixel", Method.NORMAL_FILTERING:
+                 "the total albedo per pixel; normals filtered with the material's own profile"}[method]
+        why += f"; {basis.describe()}; {extra}"
+    if material.normalize_profile:
+        why += "; profile normalised to white (the colour map sets the colour)"
+    return True, why
 
 
 def _tsm_decision(scene: Scene, variances, weights, target):

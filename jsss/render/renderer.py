@@ -27,6 +27,7 @@ from .passes import Pass
 from .planner import Plan, plan_scene
 from .profiles import render_profile
 from .scene import Scene
+from .surface_maps import MapParams
 
 __all__ = ["RenderParams", "RenderResult", "frame_program", "prepare", "render", "render_image", "render_params"]
 
@@ -46,6 +47,8 @@ class RenderParams(eqx.Module):
         (:func:`jsss.diffusion.incidence.incidence_ratio`), when the plan turns that pass on
     deposit : Medium or None, the medium whose deposit depth point lights are read at
         (:func:`jsss.render.lighting.depth_falloff`), when the plan turns that pass on
+    maps : MapParams or None, the material's colour and parameter maps and the basis profiles
+        they blend (:mod:`jsss.render.surface_maps`); differentiable in every texel
     """
 
     weights: jax.Array
@@ -56,6 +59,34 @@ class RenderParams(eqx.Module):
     medium: Medium | None = None
     oblique: Medium | None = None
     deposit: Medium | None = None
+    maps: MapParams | None = None
+
+
+def map_params(scene: Scene, plan: Plan, total, dtype) -> MapParams | None:
+    """The scene's maps as a frame reads them (None for a homogeneous material whose profile is
+    not normalised); ``total`` (3,) is the profile's own total, which normalising divides out."""
+    material = scene.material
+    maps = material.maps
+    if maps is None and not material.normalize_profile:
+        return None
+    fields = {}
+    if material.normalize_profile:
+        fields["single_scale"] = 1.0 / total
+    if maps is not None:
+        fields["texturing"] = maps.texturing
+        if maps.colour is not None:
+            fields["albedo"] = maps.colour
+        if maps.parametric:
+            basis = plan.basis
+            if basis is None:
+                raise ValueError("the material has parameter maps but the plan has no basis profiles; plan the scene "
+                                 "with plan_scene (which chooses them).")
+            media = basis.media(material.eta)
+            fields |= dict(sigma_a=maps.sigma_a, sigma_s_prime=maps.sigma_s_prime, scale_nodes=basis.scale_nodes,
+                           shape_nodes=basis.shape_nodes, node_weights=basis.weights, node_media=media)
+    fields = {k: v if isinstance(v, str) else jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), v)
+              for k, v in fields.items()}
+    return MapParams(**fields)
 
 
 def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, radii=None) -> RenderParams:
@@ -68,12 +99,15 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
     eta = scene.material.eta if medium is None else medium.eta
     eta = jnp.broadcast_to(jnp.asarray(eta), (3,))
     weights, variances = jnp.asarray(gs.weights, dtype), jnp.asarray(gs.variances, dtype)
+    total = weights.sum(0)
+    if scene.material.normalize_profile:  # d'Eon 2007 sec. 5.3: the colour map alone sets the colour
+        weights = weights / total
     medium = scene.material.medium if medium is None else medium
     if medium is not None and scene.material.kind == "medium":
         medium = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), medium)
     else:
         medium = None
-    if medium is not None and scene.material.profile_model == "dipole":
+    if medium is not None and scene.material.profile_model == "dipole" and not scene.material.normalize_profile:
         # Image-space sampling draws from the dipole exactly; any other profile model is
         # sampled through its Gaussian-sum fit (which matches the model's exact profile).
         profile = SampledProfile(medium=medium)
@@ -82,7 +116,7 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
     oblique = medium if medium is not None and plan.on(Pass.OBLIQUE_INCIDENCE) else None
     deposit = medium if medium is not None and plan.on(Pass.DEPOSIT_DEPTH) else None
     return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile, medium, oblique,
-                        deposit)
+                        deposit, map_params(scene, plan, total, dtype))
 
 
 def prepare(scene: Scene, plan: Plan, *, dtype=jnp.float32, timings: dict | None = None):

@@ -11,6 +11,12 @@ A scene file (lengths in mm, coefficients in 1/mm)::
                               # or preset = "skin", or [[material.layers]] (+ [material.base]),
                               # or [material.gaussians] variances/weights/eta
     roughness = 0.35          # specular lobe (Beckmann m); specular = 0 turns it off
+    texturing = "pre-post"    # d'Eon's rule for a colour map: pre-post | pre | post
+
+    [material.maps]           # optional, image files next to the scene (jsss.render.surface_maps)
+    albedo = "veins.png"      # colour map: 8/16-bit sRGB or linear EXR, in [0, 1]
+    sigma_a = "sa.exr"        # parameter maps, linear EXR [1/mm] (either, or both), or
+                              # diffuse_reflectance (colour) and mean_free_path (EXR, mm)
 
     [[lights]]
     type = "directional"      # or "point" with position = [x, y, z]
@@ -47,8 +53,18 @@ from ..gaussians.gaussian_sum import GaussianSum
 from ..materials import jensen2001, jensen2001_names
 from ..medium import Medium
 from . import mesh as _mesh
+from .artist_maps import coefficients_from_artist_maps
 from .lighting import Light
 from .raster import PerspectiveView
+from .surface_maps import (
+    ARTIST_KEYS,
+    COEFFICIENT_KEYS,
+    MAP_KEYS,
+    TEXTURING,
+    MapError,
+    SurfaceMaps,
+    read_map,
+)
 
 __all__ = ["Material", "Scene", "SceneError", "load_scene", "parse_scene"]
 
@@ -65,7 +81,9 @@ class Material:
     or ``gaussians`` (a given profile) is set. ``eta`` (3,) is the index the surface's
     Fresnel terms use (the top layer's for a stack). A homogeneous medium's profile is the
     dipole or, with ``profile_model = "transport"``, :mod:`jsss.transport` (exact to
-    radiative transfer) with Henyey-Greenstein ``g``.
+    radiative transfer) with Henyey-Greenstein ``g``. ``maps`` (:class:`SurfaceMaps`) vary
+    the material over the surface; ``normalize_profile`` scales the profile's total to 1 per
+    channel, so that a colour map alone sets the colour (d'Eon 2007 sec. 5.3).
     """
 
     label: str
@@ -78,6 +96,8 @@ class Material:
     roughness: float = 0.35
     profile_model: str = "dipole"
     g: float = 0.0
+    maps: SurfaceMaps | None = None
+    normalize_profile: bool = False
 
     @property
     def kind(self) -> str:
@@ -223,7 +243,64 @@ def _medium(t: _Table, prefix: str = "") -> Medium:
     return Medium(sigma_a, sigma_s, eta)
 
 
-def _material(t: _Table, source: str) -> Material:
+def _maps(t: _Table, material: Material, texturing: str, base_dir: Path) -> SurfaceMaps:
+    """Read ``[material.maps]``: the colour map and the parameter maps, checked against the material."""
+    files = {}
+    for key in MAP_KEYS:
+        if t.has(key):
+            path = Path(t.string(key))
+            files[key] = path if path.is_absolute() else base_dir / path
+    t.check_unknown(MAP_KEYS)
+    if not files:
+        t.fail("albedo", f"give at least one map: {', '.join(MAP_KEYS)}.")
+    given = lambda keys: [k for k in keys if k in files]  # noqa: E731
+    coefficients, artist = given(COEFFICIENT_KEYS), given(ARTIST_KEYS)
+    if coefficients and artist:
+        t.fail(artist[0], f"give sigma maps ({', '.join(coefficients)}) or the artist's maps "
+                          f"({', '.join(artist)}), not both.")
+    if (coefficients or artist) and material.kind != "medium":
+        t.fail((coefficients or artist)[0], f"parameter maps vary a homogeneous medium; this material is "
+                                            f"{material.kind} (a colour map, albedo, works with any material).")
+    if (coefficients or artist) and material.normalize_profile:
+        t.fail((coefficients or artist)[0], "normalize_profile and parameter maps contradict each other: "
+                                            "the maps set the profile's total.")
+    try:
+        read = {k: read_map(p, k, encoded_ok=k in ("albedo", "diffuse_reflectance")) for k, p in files.items()}
+    except MapError as error:
+        raise SceneError(str(error)) from None
+    for key, values in read.items():
+        if key in ("albedo", "diffuse_reflectance") and np.any(values > 1):
+            t.fail(key, f"{files[key]}: a reflectance must lie in [0, 1]; its largest value is {values.max():.4g} "
+                        "(an EXR colour map must be linear reflectance, not radiance).")
+        if np.any(values < 0):
+            t.fail(key, f"{files[key]}: must be >= 0; its smallest value is {values.min():.4g}.")
+        if key == "mean_free_path" and np.any(values <= 0):
+            t.fail(key, f"{files[key]}: a mean free path must be > 0 [mm]; its smallest value is {values.min():.4g}.")
+    pair = coefficients or artist
+    if len(pair) == 2 and read[pair[0]].shape != read[pair[1]].shape:
+        t.fail(pair[1], f"{files[pair[1]]} is {read[pair[1]].shape[1]} x {read[pair[1]].shape[0]} pixels but "
+                        f"{pair[0]} ({files[pair[0]]}) is {read[pair[0]].shape[1]} x {read[pair[0]].shape[0]}; "
+                        "parameter maps must have one size.")
+    sigma_a = sigma_s = None
+    if pair:
+        shape = read[pair[0]].shape
+        medium = material.medium
+        if coefficients:
+            sigma_a = read.get("sigma_a", np.broadcast_to(np.asarray(medium.sigma_a, float), shape))
+            sigma_s = read.get("sigma_s_prime", np.broadcast_to(np.asarray(medium.sigma_s_prime, float), shape))
+            if np.any(sigma_a + sigma_s <= 0):
+                t.fail(pair[0], "sigma_a + sigma_s_prime must be > 0 at every texel (no medium otherwise).")
+        else:
+            try:
+                sigma_a, sigma_s = coefficients_from_artist_maps(
+                    medium, read.get("diffuse_reflectance"), read.get("mean_free_path"), shape,
+                    profile_model=material.profile_model, g=material.g)
+            except ValueError as error:
+                t.fail(artist[0], f"{files[artist[0]]}: {error}")
+    return SurfaceMaps(read.get("albedo"), sigma_a, sigma_s, texturing, tuple((k, str(p)) for k, p in files.items()))
+
+
+def _material(t: _Table, source: str, base_dir: Path = Path(".")) -> Material:
     surface = dict(specular=t.number("specular", 1.0, nonnegative=True),
                    roughness=t.number("roughness", 0.35, positive=True))
     forms = [k for k in ("name", "sigma_a", "preset", "layers", "gaussians") if t.has(k)]
@@ -283,6 +360,14 @@ def _material(t: _Table, source: str) -> Material:
             except ValueError as error:
                 t.fail("profile", str(error))
         material = dataclasses.replace(material, profile_model=model, g=float(g))
+    texturing = t.string("texturing", TEXTURING, "pre-post")
+    normalize = t.raw("normalize_profile", False)
+    if not isinstance(normalize, bool):
+        t.fail("normalize_profile", f"must be true or false; got {normalize!r}.")
+    material = dataclasses.replace(material, normalize_profile=normalize)
+    if t.has("maps"):
+        maps = _maps(_Table(t.raw("maps"), "material.maps", source), material, texturing, base_dir)
+        material = dataclasses.replace(material, maps=maps)
     t.check_unknown()
     return material
 
@@ -324,7 +409,7 @@ def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".") -> Scene:
     # Unknown sections first: a misspelt [materail] must not be reported as a missing [material].
     root.check_unknown(_SECTIONS)
     mesh = _geometry(_Table(root.raw("geometry"), "geometry", source), Path(base_dir))
-    material = _material(_Table(root.raw("material"), "material", source), source)
+    material = _material(_Table(root.raw("material"), "material", source), source, Path(base_dir))
     entries = root.raw("lights")
     if not isinstance(entries, list) or not entries:
         root.fail("lights", "must be a non-empty array of tables ([[lights]]).")
@@ -345,7 +430,7 @@ def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".") -> Scene:
 
 
 def load_scene(path) -> Scene:
-    """Read a TOML scene file; relative OBJ paths are resolved next to it."""
+    """Read a TOML scene file; relative OBJ and map paths are resolved next to it."""
     path = Path(path)
     try:
         with open(path, "rb") as f:

@@ -40,12 +40,15 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ...fresnel import exit_lobe
 from ..passes import Method, Pass
+from ..raster import surface_attributes
 from ..shading import frame_radiance, single_scattering, specular_radiance
+from ..surface_maps import MapSampler, read_points
 
 if TYPE_CHECKING:
     from ..planner import Plan
@@ -114,6 +117,8 @@ class PixelShading:
     lights : tuple of LightGeometry at the pixels, one per light
     single_scattering, specular : bool, whether the plan runs these passes
     roughness : float, Beckmann slope RMS m; specular_weight : float, scales the lobe
+    colour_map, coefficient_map : MapSampler or None, where each pixel reads the material's colour
+        map and parameter maps (:mod:`jsss.render.surface_maps`)
     """
 
     normal: np.ndarray
@@ -124,14 +129,25 @@ class PixelShading:
     specular: bool
     roughness: float
     specular_weight: float
+    colour_map: MapSampler | None = None
+    coefficient_map: MapSampler | None = None
 
 
 def pixel_shading(scene: Scene, plan: Plan, buffers, lights) -> PixelShading:
     """The camera pass's data for ``scene`` under ``plan``, from the camera's G-buffer and the lights at it."""
     material = scene.material
+    colour_map = coefficient_map = None
+    maps = material.maps
+    if maps is not None:
+        uv = surface_attributes(buffers.raster, scene.mesh.faces, scene.mesh.uvs)
+        wrap = scene.mesh.wrap_u
+        if maps.colour is not None:
+            colour_map = MapSampler.at(uv, maps.colour.shape[:2], wrap_u=wrap)
+        if maps.parametric:
+            coefficient_map = MapSampler.at(uv, maps.sigma_a.shape[:2], wrap_u=wrap)
     return PixelShading(buffers.normal, buffers.view, buffers.coverage, tuple(lights),
                         plan.on(Pass.SINGLE_SCATTERING), plan.on(Pass.SPECULAR), material.roughness,
-                        material.specular)
+                        material.specular, colour_map, coefficient_map)
 
 
 def camera_parts(params: RenderParams, shading: PixelShading, dtype, *, medium=None):
@@ -149,14 +165,41 @@ def camera_parts(params: RenderParams, shading: PixelShading, dtype, *, medium=N
     lights = [g.astype(dtype) for g in shading.lights]
     single = None
     if shading.single_scattering and params.medium is not None:
-        single = single_scattering(params.medium if medium is None else medium, jnp.asarray(shading.normal, dtype),
-                                   jnp.asarray(shading.view, dtype), lights, params.radiant, deposit=params.deposit)
+        normal, view = jnp.asarray(shading.normal, dtype), jnp.asarray(shading.view, dtype)
+        _, _, coefficients = read_points(params.maps, None, shading.coefficient_map, dtype)
+        if coefficients is None:
+            single = single_scattering(params.medium if medium is None else medium, normal, view, lights,
+                                       params.radiant, deposit=params.deposit)
+        else:  # Jensen 2001 ("Texture"): the parameters at the exit point, blended from the basis' media
+            nodes = params.maps.node_media
+            single = (0.0, 0.0)
+            for k in range(coefficients.shape[-2]):
+                node = jax.tree_util.tree_map(lambda a: a[k], nodes)
+                radiance, exitance = single_scattering(node, normal, view, lights, params.radiant,
+                                                       deposit=params.deposit)
+                share = coefficients[..., k, :]
+                single = (single[0] + share * radiance, single[1] + share * exitance)
+        single = _surface_layer(single, params, shading, dtype)
     lobe = exit_lobe(cos_view[..., None], params.eta)
     specular = None
     if shading.specular:
         specular = specular_radiance(shading.normal, shading.view, lights, params.radiant, params.eta,
                                      roughness=shading.roughness, weight=shading.specular_weight)
     return lobe, single, specular
+
+
+def _surface_layer(single, params: RenderParams, shading: PixelShading, dtype):
+    """Single scattering under the colour map (it crosses the layer in and out at one point: times
+    :math:`c(x)`, whatever the texturing) and the profile's normalisation to white."""
+    maps = params.maps
+    if maps is None:
+        return single
+    scale = 1.0
+    if maps.albedo is not None and shading.colour_map is not None:
+        scale = shading.colour_map(maps.albedo.astype(dtype))
+    if maps.single_scale is not None:
+        scale = scale * maps.single_scale
+    return single[0] * scale, single[1] * scale
 
 
 def camera_radiance(exitance, params: RenderParams, shading: PixelShading):

@@ -16,6 +16,7 @@ import equinox as eqx
 from ..image_space import image_space_exitance, profile_radius
 from ..lighting import irradiance
 from ..passes import Method
+from ..surface_maps import scaled
 from .pixels import PixelMethod, PixelPrepared
 
 __all__ = ["ImageSpace"]
@@ -61,11 +62,16 @@ class ImageSpace(PixelMethod):
     def exitance(self, params, prepared: PixelPrepared):
         """Mertens' estimate of :math:`M = \\int R(|x - y|) E(y)\\,dA_y` (H, W, C) [W/mm^2] per pixel."""
         dtype = params.radiant.dtype
+        entry, exit_, coefficients = self.surface(params, prepared, dtype)
         E = irradiance([g.astype(dtype) for g in prepared.lights], params.radiant, params.eta, medium=params.oblique,
                        deposit=params.deposit)
-        return image_space_exitance(params.profile, E, prepared.buffers, samples=self.samples,
-                                    uniform_fraction=self.uniform_fraction, disc_radius=prepared.disc_radius,
-                                    seed=self.seed)
+        blend = None
+        if coefficients is not None:  # Mertens: each sample's profile has the parameters at its entry point
+            blend = (coefficients, params.maps.node_weights.astype(dtype), params.variances)
+        M = image_space_exitance(params.profile, scaled(E, entry), prepared.buffers, samples=self.samples,
+                                 uniform_fraction=self.uniform_fraction, disc_radius=prepared.disc_radius,
+                                 seed=self.seed, entry_blend=blend)
+        return scaled(M, exit_)
 
     def describe(self, plan) -> str:
         return f"{self.samples} samples per pixel"

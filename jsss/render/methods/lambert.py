@@ -11,6 +11,7 @@ from typing import ClassVar, final
 
 from ..lighting import irradiance
 from ..passes import Method
+from ..surface_maps import scaled
 from .pixels import PixelMethod, PixelPrepared
 
 __all__ = ["Lambert"]
@@ -27,12 +28,13 @@ class Lambert(PixelMethod):
 
     def exitance(self, params, prepared: PixelPrepared):
         """:math:`\\rho E` (H, W, C) [W/mm^2]; the irradiance scaled by the oblique-incidence law and
-        read at the deposit depth where ``params`` carry those media."""
+        read at the deposit depth where ``params`` carry those media. With maps, :math:`\\rho` is
+        the pixel's blended albedo and the colour map multiplies on entry and exit."""
         dtype = params.radiant.dtype
-        albedo = params.profile.albedo().astype(dtype)
+        entry, exit_, coefficients = self.surface(params, prepared, dtype)
         E = irradiance([g.astype(dtype) for g in prepared.lights], params.radiant, params.eta, medium=params.oblique,
                        deposit=params.deposit)
-        return albedo * E
+        return scaled(self.albedo(params, coefficients, dtype) * scaled(E, entry), exit_)
 
     def describe(self, plan) -> str:
         return "none"

@@ -25,6 +25,7 @@ from ..mesh import weld
 from ..normal_filter import laplacian_spectrum, smooth_normals, spectral_filter
 from ..passes import Method
 from ..raster import surface_attributes
+from ..surface_maps import scaled
 from .pixels import PixelMethod, PixelPrepared
 
 __all__ = ["NORMAL_FILTERS", "NormalFiltering", "filtered_normals"]
@@ -101,11 +102,11 @@ class NormalFiltering(PixelMethod):
     def exitance(self, params, prepared: PixelPrepared):
         """:math:`M_c = \\rho_c E(x; n_c)` (H, W, C) [W/mm^2]: each channel lit with its own filtered normals."""
         dtype = params.radiant.dtype
-        albedo = params.profile.albedo().astype(dtype)
+        entry, exit_, coefficients = self.surface(params, prepared, dtype)
         law = incidence_law(params.oblique) if params.oblique is not None else None  # one H solve for three channels
         channels = [irradiance([g.astype(dtype) for g in lights], params.radiant, params.eta, law=law,
                                deposit=params.deposit)[..., c] for c, lights in enumerate(prepared.channel_lights)]
-        return albedo * jnp.stack(channels, -1)
+        return scaled(self.albedo(params, coefficients, dtype) * scaled(jnp.stack(channels, -1), entry), exit_)
 
     def describe(self, plan) -> str:
         return f"{self.kind} filter"

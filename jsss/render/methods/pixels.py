@@ -18,9 +18,18 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import jax.numpy as jnp
+
 from ..image_space import CameraBuffers, camera_buffers
 from ..lighting import light_geometry, shadow_map
-from .base import PixelShading, PreparedGeometry, RenderMethod, camera_radiance, pixel_shading
+from ..surface_maps import read_points
+from .base import (
+    PixelShading,
+    PreparedGeometry,
+    RenderMethod,
+    camera_radiance,
+    pixel_shading,
+)
 
 if TYPE_CHECKING:
     from ..planner import Plan
@@ -73,6 +82,19 @@ class PixelMethod(RenderMethod):
     @abc.abstractmethod
     def prepare_own(self, scene: Scene, profile, buffers: CameraBuffers, maps: list, timings: dict):
         """What only this method prepares: ``(channel_lights, disc_radius)`` (see :class:`PixelPrepared`)."""
+
+    @staticmethod
+    def surface(params: RenderParams, prepared: PixelPrepared, dtype):
+        """What each pixel reads of the maps: ``(entry, exit, coefficients)``
+        (:func:`jsss.render.surface_maps.read_points`)."""
+        return read_points(params.maps, prepared.shading.colour_map, prepared.shading.coefficient_map, dtype)
+
+    @staticmethod
+    def albedo(params: RenderParams, coefficients, dtype):
+        """The profile's total albedo (C,), or per pixel (H, W, C) blended from the basis profiles'."""
+        if coefficients is None:
+            return params.profile.albedo().astype(dtype)
+        return jnp.einsum("...kc,kc->...c", coefficients, params.maps.node_weights.sum(1).astype(dtype))
 
     def stages(self, prepared: PixelPrepared):
         return ((f"{self.method} frame", lambda params, _: camera_radiance(self.exitance(params, prepared), params,

@@ -28,12 +28,25 @@ import numpy as np
 
 from ..blur import blur_schedule, hierarchical_blur, uniform_stretch
 from ..image_space import camera_buffers
-from ..lighting import irradiance, light_geometry, lookup, shadow_map, translucent_transmission
+from ..lighting import (
+    irradiance,
+    light_geometry,
+    lookup,
+    shadow_map,
+    translucent_transmission,
+)
 from ..mesh import is_closed
 from ..passes import Method, Pass
 from ..raster import surface_attributes
+from ..surface_maps import MapSampler, read_points, scaled
 from ..texture_space import TexelGeometry, bake_texels
-from .base import PixelShading, PreparedGeometry, RenderMethod, camera_radiance, pixel_shading
+from .base import (
+    PixelShading,
+    PreparedGeometry,
+    RenderMethod,
+    camera_radiance,
+    pixel_shading,
+)
 
 __all__ = ["TexturePrepared", "TextureSpace"]
 
@@ -51,6 +64,8 @@ class TexturePrepared(PreparedGeometry):
     schedule : BlurSchedule, or None when the plan turns diffusion off
     translucent_shadow_maps : bool, whether the plan runs that pass
     open_margin : int, unlit texels padded around the texture of an open surface (see :meth:`TextureSpace.diffusion`)
+    colour_map, coefficient_map : MapSampler or None, where each texel reads the material's colour
+        map and parameter maps (:mod:`jsss.render.surface_maps`)
     """
 
     texels: TexelGeometry
@@ -62,6 +77,8 @@ class TexturePrepared(PreparedGeometry):
     schedule: object
     translucent_shadow_maps: bool = False
     open_margin: int = 0
+    colour_map: MapSampler | None = None
+    coefficient_map: MapSampler | None = None
 
 
 @final
@@ -133,14 +150,34 @@ class TextureSpace(RenderMethod):
         if schedule is not None and not is_closed(scene.mesh):
             reach = 3.0 * np.sqrt(float(np.max(plan.variances))) / texels.median_stretch()
             margin = int(min(np.ceil(reach), texels.size // 4))
+        colour_map = coefficient_map = None
+        maps = scene.material.maps
+        if maps is not None and maps.colour is not None:
+            colour_map = MapSampler.texels(self.size, maps.colour.shape[:2], wrap_u=texels.wrap_u)
+        if maps is not None and maps.parametric:
+            coefficient_map = MapSampler.texels(self.size, maps.sigma_a.shape[:2], wrap_u=texels.wrap_u)
         return TexturePrepared(texels, texel_lights, camera.mask, uv, pixel_shading(scene, plan, camera, pixel_lights),
-                               stretch, schedule, plan.on(Pass.TRANSLUCENT_SHADOW_MAPS), margin)
+                               stretch, schedule, plan.on(Pass.TRANSLUCENT_SHADOW_MAPS), margin, colour_map,
+                               coefficient_map)
+
+    @staticmethod
+    def surface(params, prepared: TexturePrepared, dtype):
+        """What each texel reads of the maps: ``(entry, exit, coefficients)``
+        (:func:`jsss.render.surface_maps.read_points`)."""
+        return read_points(params.maps, prepared.colour_map, prepared.coefficient_map, dtype)
 
     def irradiance(self, params, prepared: TexturePrepared):
         """Light transmitted into the surface at each texel (S, S, C) [W/mm^2]
-        (:func:`jsss.render.lighting.irradiance`)."""
-        lights = [g.astype(params.radiant.dtype) for g in prepared.texel_lights]
-        return irradiance(lights, params.radiant, params.eta, medium=params.oblique, deposit=params.deposit)
+        (:func:`jsss.render.lighting.irradiance`), through the colour map's layer where there is
+        one; with parameter maps, :math:`a_k E` per basis profile ``k`` (S, S, K * C)."""
+        dtype = params.radiant.dtype
+        lights = [g.astype(dtype) for g in prepared.texel_lights]
+        E = irradiance(lights, params.radiant, params.eta, medium=params.oblique, deposit=params.deposit)
+        entry, _, coefficients = self.surface(params, prepared, dtype)
+        E = scaled(E, entry)  # d'Eon 2007 sec. 5.3: the colour layer on the way in
+        if coefficients is not None:  # one irradiance per basis profile, a_k E, side by side in the channels
+            E = (coefficients * E[..., None, :]).reshape(E.shape[:-1] + (-1,))
+        return E
 
     def diffusion(self, params, prepared: TexturePrepared, E):
         """Blurred irradiance per Gaussian (n, S, S, C), or the irradiance itself n times without diffusion.
@@ -175,13 +212,23 @@ class TextureSpace(RenderMethod):
         return blurred
 
     def texel_exitance(self, params, prepared: TexturePrepared, blurred):
-        """:math:`\\sum_i w_i B_i`, plus the translucent shadow maps' light when that pass runs (S, S, C) [W/mm^2]."""
-        M = jnp.einsum("nc,nhwc->hwc", params.weights, blurred)
+        """:math:`\\sum_i w_i B_i`, plus the translucent shadow maps' light when that pass runs (S, S, C) [W/mm^2];
+        with parameter maps the basis profiles' weights on their own blurs, summed; through the
+        colour map's layer on the way out."""
+        dtype = blurred.dtype
+        weights = params.weights
+        if prepared.coefficient_map is not None:  # sum_k sum_i W_ki G_i * (a_k E): the entry point's profile
+            weights = params.maps.node_weights.astype(dtype)  # (K, n, C)
+            weights = jnp.moveaxis(weights, 0, 1).reshape(weights.shape[1], -1)  # (n, K * C), as the channels
+        M = jnp.einsum("nc,nhwc->hwc", weights, blurred)
         if prepared.translucent_shadow_maps:
-            lights = [g.astype(blurred.dtype) for g in prepared.texel_lights]
-            M = M + translucent_transmission(blurred, params.weights, params.variances, lights,
-                                             jnp.asarray(prepared.texels.mask, blurred.dtype))
-        return M
+            lights = [g.astype(dtype) for g in prepared.texel_lights]
+            M = M + translucent_transmission(blurred, weights, params.variances, lights,
+                                             jnp.asarray(prepared.texels.mask, dtype))
+        if prepared.coefficient_map is not None:
+            M = M.reshape(M.shape[:-1] + (-1, 3)).sum(-2)
+        _, exit_, _ = self.surface(params, prepared, dtype)
+        return scaled(M, exit_)  # and the colour layer on the way out
 
     def camera(self, params, prepared: TexturePrepared, M):
         """Radiance (H, W, 3): the texel exitance looked up at each pixel, through the camera pass."""
