@@ -333,6 +333,12 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     if material.kind != "medium":
         raise RenderFitError(f"{scene.source}: fit_render fits a homogeneous medium; the scene's material is "
                              f"{material.kind} (give sigma_a, sigma_s_prime and eta, or a named material).")
+    if material.maps is not None and material.maps.parametric:
+        raise RenderFitError(f"{scene.source}: [material.maps] sets the coefficients per texel; fit_render fits one "
+                             "homogeneous medium (remove the parameter maps; a colour map, albedo, may stay).")
+    if material.normalize_profile:
+        raise RenderFitError(f"{scene.source}: normalize_profile hides the medium's own reflectance, which is what "
+                             "fit_render measures; remove it to fit.")
     if not scene.lights:
         raise RenderFitError(f"{scene.source}: the scene has no lights; a photo of an unlit object constrains no material.")
     if not (noise > 0 and np.isfinite(noise)):

@@ -107,12 +107,17 @@ def linear_frame(scene: Scene, plan: Plan, *, dtype=jnp.float64, blur_dtype=None
     Raises
     ------
     ValueError
-        The plan's method is not texture space (other methods are not linear in the weights).
+        The plan's method is not texture space (other methods are not linear in the weights), or
+        the material has parameter maps.
     """
     method = plan.method_config
     if not isinstance(method, TextureSpace):
         raise ValueError(f"linear_frame: the frame is linear in the profile's weights for texture space only; the "
                          f"plan's method is {plan.method} (plan_scene(..., method='texture-space')).")
+    maps = scene.material.maps
+    if maps is not None and maps.parametric:
+        raise ValueError(f"linear_frame: {scene.source}'s material has parameter maps, whose frame is a blend of "
+                         "basis profiles, not one profile's weights; a colour map (albedo) is linear and allowed.")
     blur_dtype = dtype if blur_dtype is None else blur_dtype
     prepared = method.prepare(scene, plan) if prepared is None else prepared
     params = render_params(scene, plan, dtype=dtype)

@@ -316,7 +316,8 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
         basis = choose_basis(material, maps.sigma_a, maps.sigma_s_prime, texture_target / 4)
         variances = basis.variances
         w = np.asarray(render_profile(material, variances).weights, float)
-        error, reached = basis.fit_error + basis.error, basis.fit_error <= texture_target / 4
+        error = basis.fit_error + basis.error
+        reached = basis.fit_error <= texture_target / 4 and basis.error <= texture_target / 4
     else:
         gs, error, reached = choose_variances(material, texture_target / 2)
         variances, w = np.asarray(gs.variances), np.asarray(gs.weights)

@@ -33,7 +33,7 @@ from .surface_maps import blend_coefficients, coordinates
 
 __all__ = ["ProfileBasis", "choose_basis"]
 
-MAX_NODES = 5  # per axis: 25 basis profiles at most
+MAX_NODES = 16  # basis profiles at most (each is one more blur chain in texture space)
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,16 +144,18 @@ def choose_basis(material: Material, sigma_a, sigma_s, target: float, *, varianc
         media = _node_medium(scale_nodes, shape_nodes, eta)
         weights, fit_error = _fits(variances, r, *_references(material, media, r))
         error = _blend_error(material, variances, r, scale_nodes, shape_nodes, weights, eta, points)
-        if error <= target or (n1 >= MAX_NODES or not varies1) and (n2 >= MAX_NODES or not varies2):
+        if error <= target:
             return ProfileBasis(scale_nodes, shape_nodes, weights, np.asarray(variances), error, fit_error)
-        # Refine the axis whose halving helps more: try each, keep the better.
         trials = []
         for m1, m2 in ((n1 + 1, n2), (n1, n2 + 1)):
-            if (m1 > n1 and (not varies1 or m1 > MAX_NODES)) or (m2 > n2 and (not varies2 or m2 > MAX_NODES)):
+            if (m1 > n1 and not varies1) or (m2 > n2 and not varies2) or m1 * m2 > MAX_NODES:
                 continue
             s1, s2 = _axis(lo1, hi1, m1), _axis(lo2, hi2, m2)
             w, _ = _fits(variances, r, *_references(material, _node_medium(s1, s2, eta), r))
             trials.append((_blend_error(material, variances, r, s1, s2, w, eta, points), m1, m2))
+        if not trials:  # as many nodes as allowed: the plan says the target was not reached
+            return ProfileBasis(scale_nodes, shape_nodes, weights, np.asarray(variances), error, fit_error)
+        # Refine the axis whose extra node helps more.
         _, n1, n2 = min(trials)
 
 

@@ -317,3 +317,23 @@ def test_map_sampler_reads_texels_bilinearly_with_u_wrapping():
     assert box.box == 2
     np.testing.assert_allclose(np.asarray(box(values)).shape, (2, 2, 3))
     assert MapSampler.texels(4, (4, 4)).identity
+
+
+def test_a_colour_map_keeps_the_texture_space_frame_linear_in_the_weights(tmp_path):
+    """fit_render solves through linear_frame: with a colour map it must still be render()'s frame
+    at the plan's material (the layer multiplies the irradiance and the exitance, both fixed)."""
+    from jsss.render import linear_frame
+    from tests.jsss.render.test_linear_frame import FIN, _weights_and_albedo
+
+    colour = _stripes([0.9, 0.6, 0.3], [0.4, 0.7, 0.2])
+    scene = _scene(tmp_path, {"albedo": _write(tmp_path, "c.exr", colour)}, scene=dict(FIN))
+    plan = plan_scene(scene, method=Method.TEXTURE_SPACE)
+    truth = render(scene, plan, dtype=jnp.float64).radiance
+    model = np.asarray(linear_frame(scene, plan, dtype=jnp.float64).radiance(*_weights_and_albedo(scene, plan)))
+    plain = render(parse_scene(FIN), plan, dtype=jnp.float64).radiance
+    assert np.abs(truth - plain).max() > 0.05 * np.abs(plain).max()  # the map matters
+    assert np.abs(model - truth).max() <= 1e-12 * np.abs(truth).max()
+    sigma_a = _stripes([0.002, 0.004, 0.007], [0.05, 0.1, 0.2])
+    mapped = _scene(tmp_path, {"sigma_a": _write(tmp_path, "sa.exr", sigma_a)}, scene=dict(FIN))
+    with pytest.raises(ValueError, match="parameter maps"):
+        linear_frame(mapped, plan_scene(mapped, method=Method.TEXTURE_SPACE))
