@@ -49,7 +49,7 @@ def test_unreadable_toml_names_the_file(tmp_path):
 
 
 def test_example_scenes_load():
-    for name in ("marble_sphere", "skin_backlit", "ketchup_plane"):
+    for name in ("marble_sphere", "skin_backlit", "ketchup_plane", "marble_veins", "checker_plane"):
         scene = load_scene(os.path.join(ROOT, "examples", f"{name}.toml"))
         assert scene.lights and scene.camera.width > 0
 
