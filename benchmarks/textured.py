@@ -13,7 +13,9 @@
    media of the range, against each one's exact dipole profile (truth: the closed form, not the
    blend), over the radii every Gaussian is resolved on.
 
-``--write`` writes the tables, dated, to docs/benchmarks/textured.md.
+``--write`` writes the tables, dated, to docs/benchmarks/textured.md; ``--image PNG`` renders
+the README's picture of the textured examples (the veined marble under each texturing rule,
+and the checker plane).
 """
 
 from __future__ import annotations
@@ -118,11 +120,51 @@ def _blending(targets, points: int):
     return rows
 
 
+def _image(path: str):
+    """The textured examples side by side, through the public API with their own plans."""
+    import dataclasses
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jsss.render import load_scene, render
+    from jsss.render.shading import tone_map
+
+    veins = load_scene(os.path.join(ROOT, "examples", "marble_veins.toml"))
+    panels = []
+    exposure = None
+    for rule in ("pre-post", "pre", "post"):
+        maps = dataclasses.replace(veins.material.maps, texturing=rule)
+        scene = dataclasses.replace(veins, material=dataclasses.replace(veins.material, maps=maps))
+        result = render(scene)
+        image, exposure = tone_map(result.radiance, exposure=exposure)
+        panels.append((image, f"marble_veins, texturing = \"{rule}\"\n{result.plan.method}"))
+    checker = render(load_scene(os.path.join(ROOT, "examples", "checker_plane.toml")))
+    panels.append((tone_map(checker.radiance)[0], f"checker_plane: sigma_a maps\n{checker.plan.method}, "
+                                                  f"{checker.plan.basis.size} basis profiles"))
+    figure, axes = plt.subplots(1, len(panels), figsize=(4 * len(panels), 3.6))
+    for axis, (image, title) in zip(axes, panels):
+        axis.imshow(image)
+        axis.set_title(title, fontsize=9)
+        axis.axis("off")
+    figure.suptitle(f"jsss textured materials ({datetime.date.today()}, jsss-render's own plans; "
+                    "truth: docs/benchmarks/textured_truth.md)", fontsize=9)
+    figure.tight_layout(rect=(0, 0, 1, 0.92))
+    figure.savefig(path, dpi=100)
+    print(f"wrote {path}")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="256^2 pixels and texels, 3 repeats")
     parser.add_argument("--write", action="store_true", help=f"write the tables to {os.path.relpath(DOCS, ROOT)}")
+    parser.add_argument("--image", metavar="PNG", help="render the README's picture of the textured examples")
     args = parser.parse_args(argv)
+    if args.image:
+        _image(args.image)
+        return
     pixels = texels = 256 if args.quick else 512
     with tempfile.TemporaryDirectory() as folder:
         times = _frame_times(folder, pixels, texels, 3 if args.quick else 9)

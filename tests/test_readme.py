@@ -31,5 +31,11 @@ def test_the_readme_scene_format_is_a_valid_scene(tmp_path):
     assert blocks
     path = tmp_path / "documented.toml"
     path.write_text(blocks[0])
+    import imageio.v3 as iio
+    import numpy as np
+
+    for name in re.findall(r'^\w+ = "(\w+\.png)"', blocks[0], flags=re.M):  # the maps it names, as a user has them
+        iio.imwrite(tmp_path / name, np.full((8, 8, 3), 200, np.uint8))
     scene = load_scene(path)
     assert scene.material.profile_model == "dipole" and len(scene.lights) == 1
+    assert scene.material.maps is not None and scene.material.maps.texturing == "pre-post"
