@@ -97,6 +97,21 @@ def _fits(variances, r, profiles, totals):
     return np.stack([w for w, _ in fitted]), float(max(np.max(e) for _, e in fitted))
 
 
+def _basis_radii(material: Material, corners: Medium, variances) -> np.ndarray:
+    """Radii [mm] for the nodes' fits and errors: the corners' own (as the homogeneous plan's
+    ``_radii``), so that a node's fit error reads as the same material's homogeneous profile
+    error, reaching down to a third of the narrowest variance's sigma (a narrower range leaves
+    that Gaussian's weight free where no radius sees it, and the blend of two such fits is then
+    off by more than either fit). A transport profile's near-source peak makes the relative
+    RMS grow as the radii reach deeper, so the range must not follow the variances below that."""
+    fulls = [full_profile(material, Medium(corners.sigma_a[k], corners.sigma_s_prime[k], corners.eta[k]))
+             for k in range(corners.sigma_a.shape[0])]
+    lo = min(float(np.min(np.asarray(f.variances)[np.asarray(f.variances) > 0])) for f in fulls)
+    hi = max(float(np.max(f.variances)) for f in fulls)
+    lo = min(np.sqrt(lo) / 30, np.sqrt(np.min(variances)) / 3)
+    return np.geomspace(lo, max(np.sqrt(hi), np.sqrt(np.max(variances))) * 8, 800)
+
+
 def _variances_for(material: Material, corners: Medium, target: float, max_terms: int = 12):
     """The fewest shared variances on which every corner node's profile is fitted within ``target``."""
     fulls = [full_profile(material, Medium(corners.sigma_a[k], corners.sigma_s_prime[k], corners.eta[k]))
@@ -134,10 +149,7 @@ def choose_basis(material: Material, sigma_a, sigma_s, target: float, *, varianc
     if variances is None:
         variances, _ = _variances_for(material, corners, target)
     variances = np.asarray(variances, float)
-    # The radii every variance is resolved on (as render_profile's): a narrower range leaves the
-    # narrowest Gaussians' weights free where no radius sees them, and the blend of two such
-    # fits is then off by more than either fit.
-    r = np.geomspace(np.sqrt(variances.min()) / 30, np.sqrt(variances.max()) * 8, 800)
+    r = _basis_radii(material, corners, variances)
     n1, n2 = (2 if varies1 else 1), (2 if varies2 else 1)
     while True:
         scale_nodes, shape_nodes = _axis(lo1, hi1, n1), _axis(lo2, hi2, n2)
