@@ -13,6 +13,12 @@
    media of the range, against each one's exact dipole profile (truth: the closed form, not the
    blend), over the radii every Gaussian is resolved on.
 
+3. **Colour map against an independent walk.** tests/truth/colour_layer_walk.py (NumPy, no
+   jsss code) carries sqrt(c) of a step map in and out of a Fresnel half-space; texture space
+   renders the same step as a scene (profile = "transport"). Per channel: the largest
+   |jsss / walk - 1| over the 1 mm bins across the edge, that bin's walk noise, and the sums;
+   for each texturing rule (only pre-post is the walk's layer).
+
 ``--write`` writes the tables, dated, to docs/benchmarks/textured.md; ``--image PNG`` renders
 the README's picture of the textured examples (the veined marble under each texturing rule,
 and the checker plane).
@@ -83,7 +89,7 @@ def _frame_times(folder: str, pixels: int, texels: int, repeats: int):
         params = render_params(scene, plan, dtype=jnp.float32)
         prepared = plan.method_config.prepare(scene, plan, params)
         frame = jax.jit(lambda p, prepared=prepared, plan=plan: plan.method_config.radiance(p, prepared))
-        seconds = median_seconds(lambda: jax.block_until_ready(frame(params)), repeats=repeats)
+        seconds = median_seconds(lambda frame=frame, params=params: jax.block_until_ready(frame(params)), repeats=repeats)
         plain = seconds if plain is None else plain
         basis = "" if plan.basis is None else f"{len(plan.basis.scale_nodes)} x {len(plan.basis.shape_nodes)}"
         rows.append((label, basis, plan.texture_size, 1000 * seconds, seconds / plain))
@@ -117,6 +123,41 @@ def _blending(targets, points: int):
         errors = np.asarray(errors)
         rows.append((target, f"{len(basis.scale_nodes)} x {len(basis.shape_nodes)}", len(basis.variances),
                      100 * basis.error, 100 * basis.fit_error, 100 * np.median(errors), 100 * errors.max()))
+    return rows
+
+
+def _walk_table(folder: str, photons: int):
+    sys.path.insert(0, ROOT)
+    from tests.truth.colour_layer_walk import step_exitance
+
+    sigma_a, sigma_s, eta = [0.02, 0.05, 0.1], [1.0, 1.2, 1.5], 1.3
+    left, right, width = [0.9, 0.6, 0.25], [0.2, 0.8, 1.0], 30.0
+    centres, truth, stderr = step_exitance(sigma_a, sigma_s, eta, left, right, photons=photons,
+                                           half_width=width / 2, bin_width=1.0, seed=11)
+    u = (np.arange(256) + 0.5) / 256
+    colour = np.empty((256, 256, 3))
+    colour[:, u < 0.5], colour[:, u >= 0.5] = left, right
+    write_exr(os.path.join(folder, "step.exr"), colour[::-1])
+    rows = []
+    for rule in ("pre-post", "pre", "post"):
+        scene = parse_scene({
+            "geometry": {"shape": "plane", "width": width, "depth": 60.0},
+            "material": {"sigma_a": sigma_a, "sigma_s_prime": sigma_s, "eta": eta, "profile": "transport",
+                         "texturing": rule, "maps": {"albedo": "step.exr"}},
+            "lights": [{"type": "directional", "direction": [0.0, 0.0, -1.0]}],
+            "camera": {"position": [0.0, 0.0, 200.0], "up": [0.0, 1.0, 0.0], "fov": 12, "resolution": [128, 128]},
+            "render": {"texture_size": 256, "accuracy": 0.02}}, source="step", base_dir=folder)
+        plan = plan_scene(scene, method=Method.TEXTURE_SPACE)
+        params = render_params(scene, plan, dtype=jnp.float64)
+        prepared = plan.method_config.prepare(scene, plan, params)
+        exitance = np.asarray(plan.method_config.exitance(params, prepared))
+        x, y = prepared.texels.position[..., 0], prepared.texels.position[..., 1]
+        middle = prepared.texels.mask & (np.abs(y) < 5.0)
+        model = np.array([exitance[middle & (np.abs(x - c) < 0.5)].mean(0) for c in centres])
+        error = model / truth - 1
+        worst = np.abs(error).argmax(0)
+        rows.append((rule, [(100 * error[w, c], 100 * stderr[w, c] / truth[w, c], centres[w]) for c, w in
+                            enumerate(worst)], 100 * (model.sum(0) / truth.sum(0) - 1)))
     return rows
 
 
@@ -168,6 +209,7 @@ def main(argv=None):
     pixels = texels = 256 if args.quick else 512
     with tempfile.TemporaryDirectory() as folder:
         times = _frame_times(folder, pixels, texels, 3 if args.quick else 9)
+        walk = _walk_table(folder, 200_000 if args.quick else 2_000_000)
     blending = _blending((0.2, 0.05, 0.02, 0.01), 16 if args.quick else 64)
     load = os.getloadavg()[0]
     lines = [f"## Frame time with maps (`benchmarks/textured.py{' --quick' if args.quick else ''}`, "
@@ -186,6 +228,18 @@ def main(argv=None):
               "|---:|---|---:|---:|---:|---:|---:|"]
     lines += [f"| {t:g} | {nodes} | {n} | {est:.2f} | {fit:.2f} | {med:.2f} | {mx:.2f} |"
               for t, nodes, n, est, fit, med, mx in blending]
+    lines += ["", f"## Colour map against an independent walk (`benchmarks/textured.py`, {datetime.date.today()})", "",
+              "Truth: tests/truth/colour_layer_walk.py (NumPy, shares no code with jsss), "
+              f"{'2e5' if args.quick else '2e6'} photons per channel: a half-space (sigma_a 0.02/0.05/0.1, "
+              "sigma_s 1.0/1.2/1.5 1/mm, g = 0, eta 1.3) under a strip beam 30 mm wide at normal incidence, "
+              "a step colour map (0.9/0.6/0.25 | 0.2/0.8/1.0) at x = 0, sqrt(c) where a photon enters and where "
+              "it leaves. jsss: the same scene, texture space, profile = \"transport\", its texel exitance in 1 mm "
+              "bins along the middle of a plane 60 mm deep. Worst bin per channel (its walk noise, its x), and "
+              "the sums.", "",
+              "| texturing | R worst % (noise, x mm) | G | B | sums R / G / B % |", "|---|---|---|---|---|"]
+    for rule, worst, sums in walk:
+        cells = " | ".join(f"{e:+.1f} ({n:.1f}, {x:+.1f})" for e, n, x in worst)
+        lines.append(f"| {rule} | {cells} | {' / '.join(f'{v:+.2f}' for v in sums)} |")
     text = "\n".join(lines) + "\n"
     print(text)
     if args.write:
