@@ -127,33 +127,20 @@ def _blending(targets, points: int):
 
 
 def _walk_table(folder: str, photons: int):
+    """The colour-map walk table: the scene, map and bins are the truth test's own
+    (tests/jsss/render/test_colour_map_truth.py), here for every rule and more photons."""
     sys.path.insert(0, ROOT)
+    from pathlib import Path
+
+    from tests.jsss.render.test_colour_map_truth import BIN, ETA, LEFT, RIGHT, SIGMA_A, SIGMA_S, WIDTH, \
+        _texture_space_bins
     from tests.truth.colour_layer_walk import step_exitance
 
-    sigma_a, sigma_s, eta = [0.02, 0.05, 0.1], [1.0, 1.2, 1.5], 1.3
-    left, right, width = [0.9, 0.6, 0.25], [0.2, 0.8, 1.0], 30.0
-    centres, truth, stderr = step_exitance(sigma_a, sigma_s, eta, left, right, photons=photons,
-                                           half_width=width / 2, bin_width=1.0, seed=11)
-    u = (np.arange(256) + 0.5) / 256
-    colour = np.empty((256, 256, 3))
-    colour[:, u < 0.5], colour[:, u >= 0.5] = left, right
-    write_exr(os.path.join(folder, "step.exr"), colour[::-1])
+    centres, truth, stderr = step_exitance(SIGMA_A, SIGMA_S, ETA, LEFT, RIGHT, photons=photons,
+                                           half_width=WIDTH / 2, bin_width=BIN, seed=11)
     rows = []
     for rule in ("pre-post", "pre", "post"):
-        scene = parse_scene({
-            "geometry": {"shape": "plane", "width": width, "depth": 60.0},
-            "material": {"sigma_a": sigma_a, "sigma_s_prime": sigma_s, "eta": eta, "profile": "transport",
-                         "texturing": rule, "maps": {"albedo": "step.exr"}},
-            "lights": [{"type": "directional", "direction": [0.0, 0.0, -1.0]}],
-            "camera": {"position": [0.0, 0.0, 200.0], "up": [0.0, 1.0, 0.0], "fov": 12, "resolution": [128, 128]},
-            "render": {"texture_size": 256, "accuracy": 0.02}}, source="step", base_dir=folder)
-        plan = plan_scene(scene, method=Method.TEXTURE_SPACE)
-        params = render_params(scene, plan, dtype=jnp.float64)
-        prepared = plan.method_config.prepare(scene, plan, params)
-        exitance = np.asarray(plan.method_config.exitance(params, prepared))
-        x, y = prepared.texels.position[..., 0], prepared.texels.position[..., 1]
-        middle = prepared.texels.mask & (np.abs(y) < 5.0)
-        model = np.array([exitance[middle & (np.abs(x - c) < 0.5)].mean(0) for c in centres])
+        model = _texture_space_bins(Path(folder), rule, centres)
         error = model / truth - 1
         worst = np.abs(error).argmax(0)
         rows.append((rule, [(100 * error[w, c], 100 * stderr[w, c] / truth[w, c], centres[w]) for c, w in

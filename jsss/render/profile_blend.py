@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..medium import Medium
-from .profiles import _numpy_fit, _reference, full_profile, shared_variances
+from .profiles import _numpy_fit, _radii, _reference, full_profile, shared_variances
 from .scene import Material
 from .surface_maps import blend_coefficients, coordinates
 
@@ -97,25 +97,27 @@ def _fits(variances, r, profiles, totals):
     return np.stack([w for w, _ in fitted]), float(max(np.max(e) for _, e in fitted))
 
 
-def _basis_radii(material: Material, corners: Medium, variances) -> np.ndarray:
-    """Radii [mm] for the nodes' fits and errors: the corners' own (as the homogeneous plan's
+def _corner_profiles(material: Material, corners: Medium):
+    """Each corner node's whole Gaussian-sum profile (what the homogeneous plan fits against)."""
+    return [full_profile(material, Medium(corners.sigma_a[k], corners.sigma_s_prime[k], corners.eta[k]))
+            for k in range(corners.sigma_a.shape[0])]
+
+
+def _basis_radii(fulls, variances) -> np.ndarray:
+    """Radii [mm] for the nodes' fits and errors: the corners' own (the homogeneous plan's
     ``_radii``), so that a node's fit error reads as the same material's homogeneous profile
     error, reaching down to a third of the narrowest variance's sigma (a narrower range leaves
     that Gaussian's weight free where no radius sees it, and the blend of two such fits is then
     off by more than either fit). A transport profile's near-source peak makes the relative
     RMS grow as the radii reach deeper, so the range must not follow the variances below that."""
-    fulls = [full_profile(material, Medium(corners.sigma_a[k], corners.sigma_s_prime[k], corners.eta[k]))
-             for k in range(corners.sigma_a.shape[0])]
-    lo = min(float(np.min(np.asarray(f.variances)[np.asarray(f.variances) > 0])) for f in fulls)
-    hi = max(float(np.max(f.variances)) for f in fulls)
-    lo = min(np.sqrt(lo) / 30, np.sqrt(np.min(variances)) / 3)
-    return np.geomspace(lo, max(np.sqrt(hi), np.sqrt(np.max(variances))) * 8, 800)
+    own = [_radii(f) for f in fulls]
+    lo = min(min(r[0] for r in own), np.sqrt(np.min(variances)) / 3)
+    hi = max(max(r[-1] for r in own), np.sqrt(np.max(variances)) * 8)
+    return np.geomspace(lo, hi, 800)
 
 
-def _variances_for(material: Material, corners: Medium, target: float, max_terms: int = 12):
-    """The fewest shared variances on which every corner node's profile is fitted within ``target``."""
-    fulls = [full_profile(material, Medium(corners.sigma_a[k], corners.sigma_s_prime[k], corners.eta[k]))
-             for k in range(corners.sigma_a.shape[0])]
+def _variances_for(material: Material, corners: Medium, fulls, target: float, max_terms: int = 12):
+    """The fewest shared variances on which every corner node's profile (``fulls``) is fitted within ``target``."""
     spans = [shared_variances(f, 2) for f in fulls]
     lo, hi = min(s[0] for s in spans), max(s[-1] for s in spans)
     r = np.geomspace(np.sqrt(lo) / 30, np.sqrt(hi) * 8, 800)
@@ -146,10 +148,11 @@ def choose_basis(material: Material, sigma_a, sigma_s, target: float, *, varianc
     varies2 = bool(np.any(hi2 - lo2 > 1e-9))
     eta = np.broadcast_to(np.asarray(material.eta, float), (3,))
     corners = _node_medium(_axis(lo1, hi1, 2 if varies1 else 1), _axis(lo2, hi2, 2 if varies2 else 1), eta)
+    fulls = _corner_profiles(material, corners)
     if variances is None:
-        variances, _ = _variances_for(material, corners, target)
+        variances, _ = _variances_for(material, corners, fulls, target)
     variances = np.asarray(variances, float)
-    r = _basis_radii(material, corners, variances)
+    r = _basis_radii(fulls, variances)
     n1, n2 = (2 if varies1 else 1), (2 if varies2 else 1)
     while True:
         scale_nodes, shape_nodes = _axis(lo1, hi1, n1), _axis(lo2, hi2, n2)
