@@ -275,8 +275,9 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
     ----------
     profile : SampledProfile
         The radial profile to integrate (differentiable: a traced medium or traced weights).
-    irradiance : array, shape (H, W, C)
-        Light transmitted into the surface at each pixel's surface point, seen by this camera.
+    irradiance : array, shape (H, W, C), or (H, W, K, C) with ``entry_blend``
+        Light transmitted into the surface at each pixel's surface point, seen by this camera;
+        with ``entry_blend``, each basis node's share :math:`a_k(p) E_k(p)` of it.
     buffers : CameraBuffers
         Positions, normals, depths and the mask of the same view.
     samples : int
@@ -288,11 +289,16 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
     seed : int
         Picks the pattern's offset at each pixel.
     entry_blend : tuple, optional
-        ``(coefficients (H, W, K, C), node_weights (K, n, C), variances (n,))``: a material whose
-        profile varies over the surface (:mod:`jsss.render.profile_blend`). Each sample's profile
-        then has the parameters at its entry point :math:`p` (Mertens sec. 5; Jensen 2001's
-        rule), :math:`\sum_k a_k(p)\sum_i W_{k,i} G(v_i, |x - p|)`; the samples are still drawn
-        from ``profile`` (any density that covers the profile keeps the estimate unbiased).
+        ``(node_weights (K, n, C), variances (n,))`` or with ``(exit_weights (H, W, K, C),
+        crossing (K, K, n, C))`` appended: a material whose profile varies over the surface
+        (:mod:`jsss.render.profile_blend`). Each sample's profile then has the parameters at its
+        entry point :math:`p` (Mertens sec. 5; Jensen 2001's rule),
+        :math:`\sum_k a_k(p) E_k(p) \sum_i W_{k,i} G(v_i, |x - p|)` with ``irradiance`` holding
+        :math:`a_k E_k`, plus, with the crossing weights, the correction for light that enters
+        one medium and leaves another, :math:`\sum_{j,k} b_j(x) C_{kj}(|x - p|)
+        (a_k E_k(p) - b_k(x) \sum_m a_m E_m(p))` (the module notes of
+        :mod:`jsss.render.profile_blend`); the samples are still drawn from ``profile`` (any
+        density that covers the profile keeps the estimate unbiased).
 
     Returns
     -------
@@ -312,8 +318,15 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
                              "(under jit or grad); profile_radius(profile) gives the default.")
         disc_radius = profile_radius(profile)
     base, importance, offsets, n_imp, n_uni = sample_pattern(samples, uniform_fraction, (H, W), seed=seed)
+    crossing_at = None
     if entry_blend is not None:
-        coefficients, node_weights, blend_variances = (jnp.asarray(a, dtype) for a in entry_blend)
+        node_weights, blend_variances = (jnp.asarray(a, dtype) for a in entry_blend[:2])
+        if len(entry_blend) == 4:  # each pixel's crossing weights on the Gaussians, (H, W, K, n, C)
+            exit_weights = jnp.asarray(entry_blend[2], dtype)
+            crossing_at = jnp.einsum("hwjc,kjic->hwkic", exit_weights, jnp.asarray(entry_blend[3], dtype))
+        if irradiance.ndim != 4 or irradiance.shape[2] != node_weights.shape[0]:
+            raise ValueError(f"image_space_exitance: with entry_blend the irradiance holds one share per basis node, "
+                             f"(H, W, {node_weights.shape[0]}, C); got shape {irradiance.shape}.")
 
     def const(a):
         return jnp.asarray(a, dtype)
@@ -378,13 +391,17 @@ def image_space_exitance(profile: SampledProfile, irradiance, buffers: CameraBuf
         q = n_imp * profile.density(r) + jnp.where(r <= R, n_uni / (jnp.pi * R**2), 0.0)
         weight = jnp.where(valid, jacobian / jnp.where(valid, q, 1.0), 0.0)
         if entry_blend is None:
-            at_distance = profile(distance)
+            value = profile(distance) * irradiance[iy, ix]
         else:
             gaussians = jnp.exp(-distance[..., None] ** 2 / (2 * blend_variances)) / (2 * jnp.pi * blend_variances)
             per_node = jnp.einsum("...i,kic->...kc", gaussians, node_weights)
-            at_distance = (coefficients[iy, ix] * per_node).sum(-2)
-        value = at_distance * irradiance[iy, ix] * weight[..., None]
+            entering = irradiance[iy, ix]  # (H, W, K, C)
+            value = (entering * per_node).sum(-2)
+            if crossing_at is not None:  # light that entered in another medium than x's
+                away = entering - exit_weights * entering.sum(-2, keepdims=True)
+                value = value + jnp.einsum("hwi,hwkic,hwkc->hwc", gaussians, crossing_at, away)
+        value = value * weight[..., None]
         return total + jnp.where(valid[..., None], value, 0.0), None
 
-    total, _ = jax.lax.scan(step, jnp.zeros(irradiance.shape, dtype), (const(base), jnp.asarray(importance)))
+    total, _ = jax.lax.scan(step, jnp.zeros((H, W, irradiance.shape[-1]), dtype), (const(base), jnp.asarray(importance)))
     return total

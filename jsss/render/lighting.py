@@ -24,15 +24,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..fresnel import fresnel_transmittance
 from ..diffusion.incidence import deposit_depth, incidence_law
+from ..fresnel import fresnel_transmittance
 from .mesh import Mesh
 from .raster import OrthographicView, PerspectiveView, rasterize, surface_attributes
 
-__all__ = ["Light", "LightGeometry", "ShadowMap", "irradiance", "light_geometry", "shadow_map",
+__all__ = ["Light", "LightGeometry", "ShadowMap", "irradiance", "light_geometry", "node_irradiance", "shadow_map",
            "translucent_transmission"]
 
 
@@ -232,6 +233,27 @@ def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None, deposi
         weight = (cos * jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None]
         total = total + radiant[i] * weight * transmitted
     return total
+
+
+def node_irradiance(lights: list[LightGeometry], radiant, eta, nodes, *, oblique: bool, deposit: bool):
+    r"""Irradiance (..., K, C) as each basis node ``k`` of a parameter map receives it: with
+    ``oblique`` scaled by node ``k``'s own oblique-incidence law, with ``deposit`` point lights
+    read at its own deposit depth (:func:`irradiance` with ``nodes[k]``, a Medium of shape (K, C)).
+
+    Where the medium varies over the surface, so do both: a texel of skin returns oblique light
+    by another law, and scatters it at another depth, than a texel of marble beside it. A
+    texel's light is then :math:`\sum_k a_k E_k` for its blend weights :math:`a_k`, the law of
+    the blended profile (each node's profile meets its own law).
+    """
+    if not (oblique or deposit):  # every node receives the same light
+        E = irradiance(lights, radiant, eta)
+        return jnp.broadcast_to(E[..., None, :], E.shape[:-1] + (nodes.sigma_a.shape[0], E.shape[-1]))
+    per_node = []
+    for k in range(nodes.sigma_a.shape[0]):
+        node = jax.tree_util.tree_map(lambda a, k=k: a[k], nodes)
+        per_node.append(irradiance(lights, radiant, eta, medium=node if oblique else None,
+                                   deposit=node if deposit else None))
+    return jnp.stack(per_node, -2)
 
 
 def _bilinear(texture, uv, mask):

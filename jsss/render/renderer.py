@@ -83,7 +83,8 @@ def map_params(scene: Scene, plan: Plan, total, dtype) -> MapParams | None:
                                  "with plan_scene (which chooses them).")
             media = basis.media(material.eta)
             fields |= dict(sigma_a=maps.sigma_a, sigma_s_prime=maps.sigma_s_prime, scale_nodes=basis.scale_nodes,
-                           shape_nodes=basis.shape_nodes, node_weights=basis.weights, node_media=media)
+                           shape_nodes=basis.shape_nodes, node_weights=basis.weights, node_media=media,
+                           node_crossing=basis.crossing)
     fields = {k: v if isinstance(v, str) else jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), v)
               for k, v in fields.items()}
     return MapParams(**fields)

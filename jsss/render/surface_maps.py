@@ -42,7 +42,7 @@ from ..medium import Medium
 from ..numerics import safe_sqrt
 
 __all__ = ["MAP_KEYS", "TEXTURING", "MapError", "MapParams", "MapSampler", "SurfaceMaps", "blend_coefficients",
-           "coordinates", "read_map", "read_points", "scaled", "srgb_to_linear"]
+           "coordinates", "crossing_light", "read_map", "read_points", "scaled", "srgb_to_linear"]
 
 TEXTURING = ("pre-post", "pre", "post")
 COLOUR_KEYS = ("albedo",)
@@ -329,6 +329,9 @@ class MapParams(eqx.Module):
     scale_nodes, shape_nodes : (N1, 3), (N2, 3), the basis' nodes (:mod:`jsss.render.profile_blend`)
     node_weights : (K, n, 3), each node's Gaussian weights on the plan's variances
     node_media : Medium (K, 3), the nodes as media (single scattering)
+    node_crossing : (K, K, n, 3), weights of the correction for light that enters node k's
+        medium and leaves node j's (:mod:`jsss.render.profile_blend`, "Light that crosses a
+        sharp edge")
     single_scale : (3,) or None, scales single scattering where the profile is normalised to white
     texturing : {"pre-post", "pre", "post"} (static)
     """
@@ -340,6 +343,7 @@ class MapParams(eqx.Module):
     shape_nodes: jax.Array | None = None
     node_weights: jax.Array | None = None
     node_media: Medium | None = None
+    node_crossing: jax.Array | None = None
     single_scale: jax.Array | None = None
     texturing: str = eqx.field(default="pre-post", static=True)
 
@@ -353,9 +357,35 @@ class MapParams(eqx.Module):
         root = safe_sqrt(colour)
         return root, root
 
+    def node_mixture(self):
+        """(n, 3): the basis nodes' Gaussian weights, each node's normalised to unit light per
+        channel, averaged over the nodes -- a density that covers every node's profile (image
+        space draws its samples from it)."""
+        weights = jnp.abs(self.node_weights)
+        return (weights / weights.sum(1, keepdims=True)).mean(0)
+
+    def crosses(self) -> bool:
+        """Whether light can cross between two basis nodes' media (more than one node)."""
+        return self.node_crossing is not None and self.node_crossing.shape[0] > 1
+
     def coefficients(self, sigma_a, sigma_s_prime):
         """Bilinear weights (..., K, 3) of coefficients read at the points among the basis nodes."""
         return blend_coefficients(self.scale_nodes, self.shape_nodes, sigma_a, sigma_s_prime)
+
+
+def crossing_light(blurred, exit_weights, crossing):
+    r"""Texture space's correction for light that crosses from one basis node's medium into
+    another's (:mod:`jsss.render.profile_blend`, "Light that crosses a sharp edge"), (S, S, C):
+
+    .. math:: \sum_{j,k} b_j \sum_i U_{kj,i}\,\big(B_{k,i} - b_k \textstyle\sum_m B_{m,i}\big)
+
+    ``blurred`` (n, S, S, K, C): :math:`B_{k,i}`, the blur of :math:`a_k E` by Gaussian ``i``;
+    ``exit_weights`` (S, S, K, C): the texels' own blend weights :math:`b`; ``crossing``
+    (K, K, n, C): :math:`U`. Zero wherever the light entered in the texel's own medium.
+    """
+    away = blurred - exit_weights * blurred.sum(-2, keepdims=True)  # light that entered in another medium
+    per_exit = jnp.einsum("kjic,ihwkc->hwjc", crossing, away)
+    return (exit_weights * per_exit).sum(-2)
 
 
 def scaled(values, factor):

@@ -45,17 +45,19 @@ import jax.numpy as jnp
 import numpy as np
 
 from ...fresnel import exit_lobe
+from ..lighting import irradiance, node_irradiance
 from ..passes import Method, Pass
 from ..raster import surface_attributes
 from ..shading import frame_radiance, single_scattering, specular_radiance
-from ..surface_maps import MapSampler, read_points
+from ..surface_maps import MapSampler, read_points, scaled
 
 if TYPE_CHECKING:
     from ..planner import Plan
     from ..renderer import RenderParams
     from ..scene import Scene
 
-__all__ = ["PixelShading", "PreparedGeometry", "RenderMethod", "camera_parts", "camera_radiance", "pixel_shading"]
+__all__ = ["PixelShading", "PreparedGeometry", "RenderMethod", "camera_parts", "camera_radiance", "entry_irradiance",
+           "pixel_shading"]
 
 
 def _feed(digest, value) -> None:
@@ -150,6 +152,28 @@ def pixel_shading(scene: Scene, plan: Plan, buffers, lights) -> PixelShading:
                         material.specular, colour_map, coefficient_map)
 
 
+def entry_irradiance(params: RenderParams, lights, coefficients=None, entry=None, *, law=None):
+    r"""The light that enters the medium at each point [W/mm^2]: the transmitted irradiance
+    (:func:`jsss.render.lighting.irradiance`, with the plan's oblique-incidence law and deposit
+    depth) through the colour layer's ``entry`` factor, shape (..., C).
+
+    With parameter maps (``coefficients`` (..., K, C), the points' blend weights) it is
+    :math:`a_k E_k` per basis node, shape (..., K, C): each node lit with its *own* law and
+    deposit depth (:func:`jsss.render.lighting.node_irradiance`), so that a texel of skin beside
+    one of marble returns oblique light as skin does. ``law``: the homogeneous medium's law,
+    solved already (normal filtering lights a frame once per channel).
+    """
+    dtype = params.radiant.dtype
+    lights = [g.astype(dtype) for g in lights]
+    if coefficients is None:
+        medium = None if law is not None else params.oblique
+        return scaled(irradiance(lights, params.radiant, params.eta, medium=medium, deposit=params.deposit,
+                                 law=law), entry)
+    E = node_irradiance(lights, params.radiant, params.eta, params.maps.node_media,
+                        oblique=params.oblique is not None, deposit=params.deposit is not None)
+    return coefficients * scaled(E, None if entry is None else entry[..., None, :])
+
+
 def camera_parts(params: RenderParams, shading: PixelShading, dtype, *, medium=None):
     r"""The camera pass's per-pixel parts besides the exitance, in ``dtype``: ``(exit_lobe,
     single_scattering, specular)``.
@@ -176,7 +200,7 @@ def camera_parts(params: RenderParams, shading: PixelShading, dtype, *, medium=N
             for k in range(coefficients.shape[-2]):
                 node = jax.tree_util.tree_map(lambda a: a[k], nodes)
                 radiance, exitance = single_scattering(node, normal, view, lights, params.radiant,
-                                                       deposit=params.deposit)
+                                                       deposit=None if params.deposit is None else node)
                 share = coefficients[..., k, :]
                 single = (single[0] + share * radiance, single[1] + share * exitance)
         single = _surface_layer(single, params, shading, dtype)

@@ -13,10 +13,10 @@ from typing import ClassVar, final
 
 import equinox as eqx
 
-from ..image_space import image_space_exitance, profile_radius
-from ..lighting import irradiance
+from ..image_space import SampledProfile, image_space_exitance, profile_radius
 from ..passes import Method
 from ..surface_maps import scaled
+from .base import entry_irradiance
 from .pixels import PixelMethod, PixelPrepared
 
 __all__ = ["ImageSpace"]
@@ -56,19 +56,31 @@ class ImageSpace(PixelMethod):
             raise ValueError(f"ImageSpace(samples={self.samples}, uniform_fraction={self.uniform_fraction}) leaves no "
                              "importance samples; lower uniform_fraction or raise samples.")
 
-    def prepare_own(self, scene, profile, buffers, maps, timings):
-        return None, profile_radius(profile)
+    def prepare_own(self, scene, params, buffers, maps, timings):
+        return None, profile_radius(self.sampling_profile(params))
+
+    @staticmethod
+    def sampling_profile(params) -> SampledProfile:
+        """Where the samples are drawn: the material's profile, or with parameter maps the
+        mixture of every basis node's profile, each normalised to its own light
+        (:meth:`jsss.render.surface_maps.MapParams.node_mixture`). The material's own profile
+        would serve a map of skin on a marble material badly: marble's long tail rarely lands
+        in skin's core (32 samples: pixels 50-190 % off, unbiased but noisy)."""
+        if params.maps is None or params.maps.node_weights is None:
+            return params.profile
+        return SampledProfile(weights=params.maps.node_mixture(), variances=params.variances)
 
     def exitance(self, params, prepared: PixelPrepared):
         """Mertens' estimate of :math:`M = \\int R(|x - y|) E(y)\\,dA_y` (H, W, C) [W/mm^2] per pixel."""
         dtype = params.radiant.dtype
         entry, exit_, coefficients = self.surface(params, prepared, dtype)
-        E = irradiance([g.astype(dtype) for g in prepared.lights], params.radiant, params.eta, medium=params.oblique,
-                       deposit=params.deposit)
+        E = entry_irradiance(params, prepared.lights, coefficients, entry)
         blend = None
         if coefficients is not None:  # Mertens: each sample's profile has the parameters at its entry point
-            blend = (coefficients, params.maps.node_weights.astype(dtype), params.variances)
-        M = image_space_exitance(params.profile, scaled(E, entry), prepared.buffers, samples=self.samples,
+            blend = (params.maps.node_weights.astype(dtype), params.variances)
+            if params.maps.crosses():  # and light that leaves in another medium than it entered
+                blend = blend + (coefficients, params.maps.node_crossing.astype(dtype))
+        M = image_space_exitance(self.sampling_profile(params), E, prepared.buffers, samples=self.samples,
                                  uniform_fraction=self.uniform_fraction, disc_radius=prepared.disc_radius,
                                  seed=self.seed, entry_blend=blend)
         return scaled(M, exit_)

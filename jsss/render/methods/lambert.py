@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from typing import ClassVar, final
 
-from ..lighting import irradiance
 from ..passes import Method
 from ..surface_maps import scaled
+from .base import entry_irradiance
 from .pixels import PixelMethod, PixelPrepared
 
 __all__ = ["Lambert"]
@@ -23,18 +23,16 @@ class Lambert(PixelMethod):
 
     method: ClassVar[Method] = Method.LAMBERT
 
-    def prepare_own(self, scene, profile, buffers, maps, timings):
+    def prepare_own(self, scene, params, buffers, maps, timings):
         return None, 0.0
 
     def exitance(self, params, prepared: PixelPrepared):
         """:math:`\\rho E` (H, W, C) [W/mm^2]; the irradiance scaled by the oblique-incidence law and
-        read at the deposit depth where ``params`` carry those media. With maps, :math:`\\rho` is
-        the pixel's blended albedo and the colour map multiplies on entry and exit."""
-        dtype = params.radiant.dtype
-        entry, exit_, coefficients = self.surface(params, prepared, dtype)
-        E = irradiance([g.astype(dtype) for g in prepared.lights], params.radiant, params.eta, medium=params.oblique,
-                       deposit=params.deposit)
-        return scaled(self.albedo(params, coefficients, dtype) * scaled(E, entry), exit_)
+        read at the deposit depth where ``params`` carry those media. With maps, :math:`\\rho E` is
+        blended from the basis nodes' (each lit by its own law) and the colour map multiplies on
+        entry and exit."""
+        entry, exit_, coefficients = self.surface(params, prepared, params.radiant.dtype)
+        return scaled(self.reflected(params, entry_irradiance(params, prepared.lights, coefficients, entry)), exit_)
 
     def describe(self, plan) -> str:
         return "none"

@@ -20,12 +20,13 @@ import numpy as np
 
 from ...diffusion.incidence import incidence_law
 from ..image_space import SampledProfile, rms_radius
-from ..lighting import irradiance, light_geometry
+from ..lighting import light_geometry
 from ..mesh import weld
 from ..normal_filter import laplacian_spectrum, smooth_normals, spectral_filter
 from ..passes import Method
 from ..raster import surface_attributes
 from ..surface_maps import scaled
+from .base import entry_irradiance
 from .pixels import PixelMethod, PixelPrepared
 
 __all__ = ["NORMAL_FILTERS", "NormalFiltering", "filtered_normals"]
@@ -86,9 +87,9 @@ class NormalFiltering(PixelMethod):
             raise ValueError(f"NormalFiltering(eigenpairs={self.eigenpairs!r}) must be a whole number >= 1 "
                              "(default 128).")
 
-    def prepare_own(self, scene, profile, buffers, maps, timings):
+    def prepare_own(self, scene, params, buffers, maps, timings):
         t0 = time.perf_counter()
-        filtered = filtered_normals(scene, profile, kind=self.kind, eigenpairs=self.eigenpairs)
+        filtered = filtered_normals(scene, params.profile, kind=self.kind, eigenpairs=self.eigenpairs)
         raster, faces = buffers.raster, scene.mesh.faces
         # Two-sided shading turned some pixels' normals around: turn their filtered normals too.
         facing = np.sign((surface_attributes(raster, faces, scene.mesh.normals) * buffers.normal).sum(-1))
@@ -101,12 +102,13 @@ class NormalFiltering(PixelMethod):
 
     def exitance(self, params, prepared: PixelPrepared):
         """:math:`M_c = \\rho_c E(x; n_c)` (H, W, C) [W/mm^2]: each channel lit with its own filtered normals."""
-        dtype = params.radiant.dtype
-        entry, exit_, coefficients = self.surface(params, prepared, dtype)
-        law = incidence_law(params.oblique) if params.oblique is not None else None  # one H solve for three channels
-        channels = [irradiance([g.astype(dtype) for g in lights], params.radiant, params.eta, law=law,
-                               deposit=params.deposit)[..., c] for c, lights in enumerate(prepared.channel_lights)]
-        return scaled(self.albedo(params, coefficients, dtype) * scaled(jnp.stack(channels, -1), entry), exit_)
+        entry, exit_, coefficients = self.surface(params, prepared, params.radiant.dtype)
+        law = None
+        if params.oblique is not None and coefficients is None:
+            law = incidence_law(params.oblique)  # one H solve for three channels
+        channels = [entry_irradiance(params, lights, coefficients, entry, law=law)[..., c]
+                    for c, lights in enumerate(prepared.channel_lights)]
+        return scaled(self.reflected(params, jnp.stack(channels, -1)), exit_)
 
     def describe(self, plan) -> str:
         return f"{self.kind} filter"

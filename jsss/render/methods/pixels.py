@@ -76,11 +76,11 @@ class PixelMethod(RenderMethod):
         lights = tuple(light_geometry(buffers.position, buffers.normal, buffers.mask, light, m)
                        for light, m in zip(scene.lights, maps))
         timings["camera raster + shadows"] = time.perf_counter() - t0
-        channel_lights, disc_radius = self.prepare_own(scene, params.profile, buffers, maps, timings)
+        channel_lights, disc_radius = self.prepare_own(scene, params, buffers, maps, timings)
         return PixelPrepared(buffers, pixel_shading(scene, plan, buffers, lights), channel_lights, disc_radius)
 
     @abc.abstractmethod
-    def prepare_own(self, scene: Scene, profile, buffers: CameraBuffers, maps: list, timings: dict):
+    def prepare_own(self, scene: Scene, params: RenderParams, buffers: CameraBuffers, maps: list, timings: dict):
         """What only this method prepares: ``(channel_lights, disc_radius)`` (see :class:`PixelPrepared`)."""
 
     @staticmethod
@@ -90,11 +90,13 @@ class PixelMethod(RenderMethod):
         return read_points(params.maps, prepared.shading.colour_map, prepared.shading.coefficient_map, dtype)
 
     @staticmethod
-    def albedo(params: RenderParams, coefficients, dtype):
-        """The profile's total albedo (C,), or per pixel (H, W, C) blended from the basis profiles'."""
-        if coefficients is None:
-            return params.profile.albedo().astype(dtype)
-        return jnp.einsum("...kc,kc->...c", coefficients, params.maps.node_weights.sum(1).astype(dtype))
+    def reflected(params: RenderParams, E):
+        r""":math:`\rho E` (H, W, C): the profile's total albedo times the entering light ``E``
+        (:func:`~jsss.render.methods.base.entry_irradiance`); with parameter maps ``E`` holds
+        :math:`a_k E_k` (H, W, K, C) and this is :math:`\sum_k \rho_k a_k E_k`."""
+        if E.ndim == 3:
+            return params.profile.albedo().astype(E.dtype) * E
+        return jnp.einsum("...kc,kc->...c", E, params.maps.node_weights.sum(1).astype(E.dtype))
 
     def stages(self, prepared: PixelPrepared):
         return ((f"{self.method} frame", lambda params, _: camera_radiance(self.exitance(params, prepared), params,

@@ -29,7 +29,6 @@ import numpy as np
 from ..blur import blur_schedule, hierarchical_blur, uniform_stretch
 from ..image_space import camera_buffers
 from ..lighting import (
-    irradiance,
     light_geometry,
     lookup,
     shadow_map,
@@ -38,13 +37,14 @@ from ..lighting import (
 from ..mesh import is_closed
 from ..passes import Method, Pass
 from ..raster import surface_attributes
-from ..surface_maps import MapSampler, read_points, scaled
+from ..surface_maps import MapSampler, crossing_light, read_points, scaled
 from ..texture_space import TexelGeometry, bake_texels
 from .base import (
     PixelShading,
     PreparedGeometry,
     RenderMethod,
     camera_radiance,
+    entry_irradiance,
     pixel_shading,
 )
 
@@ -169,14 +169,13 @@ class TextureSpace(RenderMethod):
     def irradiance(self, params, prepared: TexturePrepared):
         """Light transmitted into the surface at each texel (S, S, C) [W/mm^2]
         (:func:`jsss.render.lighting.irradiance`), through the colour map's layer where there is
-        one; with parameter maps, :math:`a_k E` per basis profile ``k`` (S, S, K * C)."""
-        dtype = params.radiant.dtype
-        lights = [g.astype(dtype) for g in prepared.texel_lights]
-        E = irradiance(lights, params.radiant, params.eta, medium=params.oblique, deposit=params.deposit)
-        entry, _, coefficients = self.surface(params, prepared, dtype)
-        E = scaled(E, entry)  # d'Eon 2007 sec. 5.3: the colour layer on the way in
-        if coefficients is not None:  # one irradiance per basis profile, a_k E, side by side in the channels
-            E = (coefficients * E[..., None, :]).reshape(E.shape[:-1] + (-1,))
+        one; with parameter maps, :math:`a_k E_k` per basis profile ``k`` (S, S, K * C), each lit
+        with its node's own oblique-incidence law and deposit depth."""
+        entry, _, coefficients = self.surface(params, prepared, params.radiant.dtype)
+        # d'Eon 2007 sec. 5.3: the colour layer on the way in
+        E = entry_irradiance(params, prepared.texel_lights, coefficients, entry)
+        if coefficients is not None:  # one irradiance per basis profile, a_k E_k, side by side in the channels
+            E = E.reshape(E.shape[:-2] + (-1,))
         return E
 
     def diffusion(self, params, prepared: TexturePrepared, E):
@@ -213,8 +212,9 @@ class TextureSpace(RenderMethod):
 
     def texel_exitance(self, params, prepared: TexturePrepared, blurred):
         """:math:`\\sum_i w_i B_i`, plus the translucent shadow maps' light when that pass runs (S, S, C) [W/mm^2];
-        with parameter maps the basis profiles' weights on their own blurs, summed; through the
-        colour map's layer on the way out."""
+        with parameter maps the basis profiles' weights on their own blurs, summed, and the light
+        that crossed from one medium into another (:func:`jsss.render.surface_maps.crossing_light`);
+        through the colour map's layer on the way out."""
         dtype = blurred.dtype
         weights = params.weights
         if prepared.coefficient_map is not None:  # sum_k sum_i W_ki G_i * (a_k E): the entry point's profile
@@ -225,9 +225,12 @@ class TextureSpace(RenderMethod):
             lights = [g.astype(dtype) for g in prepared.texel_lights]
             M = M + translucent_transmission(blurred, weights, params.variances, lights,
                                              jnp.asarray(prepared.texels.mask, dtype))
+        _, exit_, coefficients = self.surface(params, prepared, dtype)
         if prepared.coefficient_map is not None:
             M = M.reshape(M.shape[:-1] + (-1, 3)).sum(-2)
-        _, exit_, _ = self.surface(params, prepared, dtype)
+            if params.maps.crosses():  # light that enters one medium and leaves another
+                nodes = blurred.reshape(blurred.shape[:-1] + (-1, 3))
+                M = M + crossing_light(nodes, coefficients, params.maps.node_crossing.astype(dtype))
         return scaled(M, exit_)  # and the colour layer on the way out
 
     def camera(self, params, prepared: TexturePrepared, M):
