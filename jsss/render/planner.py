@@ -358,9 +358,10 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     else:
         for name in (Pass.TEXTURE_GEOMETRY, Pass.STRETCH_CORRECTION, Pass.TRANSLUCENT_SHADOW_MAPS):
             decisions[name] = (False, f"texture space only; method is {method}")
-    decisions[Pass.SINGLE_SCATTERING] = _single_scattering_decision(material, target)
-    decisions[Pass.OBLIQUE_INCIDENCE] = oblique_incidence_decision(material, target)
-    decisions[Pass.DEPOSIT_DEPTH] = deposit_depth_decision(scene, target)
+    nodes = None if basis is None else basis.media(material.eta)  # parameter maps: every node's medium counts
+    decisions[Pass.SINGLE_SCATTERING] = _single_scattering_decision(material, target, nodes)
+    decisions[Pass.OBLIQUE_INCIDENCE] = oblique_incidence_decision(material, target, nodes)
+    decisions[Pass.DEPOSIT_DEPTH] = deposit_depth_decision(scene, target, nodes)
     spec = material.specular > 0
     decisions[Pass.SPECULAR] = (spec, f"Beckmann m = {material.roughness:g}, weight {material.specular:g}"
                              if spec else "material specular = 0")
@@ -477,12 +478,21 @@ def _tsm_decision(scene: Scene, variances, weights, target):
 OBLIQUE_COSINE = 0.5  # light arriving 60 degrees from the normal: where the planner weighs the effect
 
 
-def oblique_incidence_decision(material, target):
+def _largest(values) -> np.ndarray:
+    """(3,): per channel, the value of largest magnitude over the media (rows of (..., 3))."""
+    values = np.asarray(values, float).reshape(-1, 3)
+    return values[np.argmax(np.abs(values), 0), np.arange(3)]
+
+
+def oblique_incidence_decision(material, target, nodes=None):
     """On when light arriving at 60 degrees returns at least a quarter of the target more (or
-    less) than a normal beam, in some channel (:func:`jsss.diffusion.incidence.incidence_ratio`)."""
+    less) than a normal beam, in some channel (:func:`jsss.diffusion.incidence.incidence_ratio`)
+    of the material's medium or of any basis node's (``nodes``, a Medium (K, 3), parameter maps)."""
     if material.medium is None:
         return False, f"needs a homogeneous medium; material is {material.kind}"
-    growth = np.asarray(incidence_ratio(material.medium, OBLIQUE_COSINE), float).reshape(-1) - 1
+    media = [material.medium] + ([] if nodes is None else [nodes])
+    growth = _largest(np.concatenate([np.asarray(incidence_ratio(m, OBLIQUE_COSINE), float).reshape(-1, 3)
+                                      for m in media]) - 1)
     on = bool(np.abs(growth).max() >= target / 4)
     shown = "/".join(f"{100 * x:+.1f}" for x in growth * np.ones(3))
     return on, (f"light arriving at 60 degrees returns {shown} % more than a normal beam "
@@ -490,26 +500,30 @@ def oblique_incidence_decision(material, target):
                 "normal incidence, so the irradiance is scaled by Chandrasekhar's law")
 
 
-def deposit_change(scene):
+def deposit_change(scene, nodes=None):
     """(change, nearest, depth): how much less irradiance reaches the deposit depth ``depth``
-    [mm, deepest channel] than the surface, under the nearest point light (``nearest`` mm from
-    the mesh); (0, inf, depth) without point lights or a homogeneous medium."""
+    [mm, deepest channel of the medium and of any basis node ``nodes``] than the surface, under
+    the nearest point light (``nearest`` mm from the mesh); (0, inf, depth) without point lights
+    or a homogeneous medium."""
     material = scene.material
     points = [light for light in scene.lights if light.kind == "point"]
     if material.medium is None or not points:
         return 0.0, np.inf, 0.0
     depth = float(np.max(np.asarray(deposit_depth(material.medium), float)))
+    if nodes is not None:
+        depth = max(depth, float(np.max(np.asarray(deposit_depth(nodes), float))))
     nearest = min(distance_to_surface(scene.mesh, light.position) for light in points)
     return float(point_light_loss(nearest, depth)), nearest, depth
 
 
-def deposit_depth_decision(scene, target):
+def deposit_depth_decision(scene, target, nodes=None):
     """On when a point light is near enough that reading it at the deposit depth changes its
-    irradiance under the lamp by a quarter of the target (:func:`jsss.diffusion.incidence.deposit_depth`)."""
+    irradiance under the lamp by a quarter of the target (:func:`jsss.diffusion.incidence.deposit_depth`),
+    at the deepest of the medium's and the basis nodes' (``nodes``) depths."""
     material = scene.material
     if material.medium is None:
         return False, f"needs a homogeneous medium; material is {material.kind}"
-    change, nearest, depth = deposit_change(scene)
+    change, nearest, depth = deposit_change(scene, nodes)
     if np.isinf(nearest):
         return False, "no point light (parallel rays do not spread below the surface)"
     on = bool(change >= target / 4)
@@ -518,10 +532,12 @@ def deposit_depth_decision(scene, target):
                 f"{100 * target / 4:.2g} %)")
 
 
-def _single_scattering_decision(material, target):
+def _single_scattering_decision(material, target, nodes=None):
     if material.medium is None:
         return False, f"needs a homogeneous medium; material is {material.kind}"
     share = single_scattering_share(material.medium) * np.ones(3)
+    if nodes is not None:  # the largest share of any basis node's medium
+        share = np.maximum(share, np.asarray(single_scattering_share(nodes), float).reshape(-1, 3).max(0))
     on = bool(share.max() >= target / 4)
     shares = "/".join(f"{100 * s:.1f}" for s in share)
     return on, (f"first bounce carries {shares} % of the light leaving "

@@ -120,7 +120,8 @@ class PixelShading:
     single_scattering, specular : bool, whether the plan runs these passes
     roughness : float, Beckmann slope RMS m; specular_weight : float, scales the lobe
     colour_map, coefficient_map : MapSampler or None, where each pixel reads the material's colour
-        map and parameter maps (:mod:`jsss.render.surface_maps`)
+        map (bilinearly) and parameter maps (the texel it falls in, :meth:`MapSampler.at`)
+        (:mod:`jsss.render.surface_maps`)
     """
 
     normal: np.ndarray
@@ -146,7 +147,8 @@ def pixel_shading(scene: Scene, plan: Plan, buffers, lights) -> PixelShading:
         if maps.colour is not None:
             colour_map = MapSampler.at(uv, maps.colour.shape[:2], wrap_u=wrap)
         if maps.parametric:
-            coefficient_map = MapSampler.at(uv, maps.sigma_a.shape[:2], wrap_u=wrap)
+            # Each map texel is one medium (surface_maps.crossing_light says why)
+            coefficient_map = MapSampler.at(uv, maps.sigma_a.shape[:2], wrap_u=wrap, nearest=True)
     return PixelShading(buffers.normal, buffers.view, buffers.coverage, tuple(lights),
                         plan.on(Pass.SINGLE_SCATTERING), plan.on(Pass.SPECULAR), material.roughness,
                         material.specular, colour_map, coefficient_map)

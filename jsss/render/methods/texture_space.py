@@ -65,7 +65,7 @@ class TexturePrepared(PreparedGeometry):
     translucent_shadow_maps : bool, whether the plan runs that pass
     open_margin : int, unlit texels padded around the texture of an open surface (see :meth:`TextureSpace.diffusion`)
     colour_map, coefficient_map : MapSampler or None, where each texel reads the material's colour
-        map and parameter maps (:mod:`jsss.render.surface_maps`)
+        map (bilinearly) and parameter maps (the map texel it falls in) (:mod:`jsss.render.surface_maps`)
     """
 
     texels: TexelGeometry
@@ -155,7 +155,8 @@ class TextureSpace(RenderMethod):
         if maps is not None and maps.colour is not None:
             colour_map = MapSampler.texels(self.size, maps.colour.shape[:2], wrap_u=texels.wrap_u)
         if maps is not None and maps.parametric:
-            coefficient_map = MapSampler.texels(self.size, maps.sigma_a.shape[:2], wrap_u=texels.wrap_u)
+            # Each map texel is one medium (surface_maps.crossing_light says why)
+            coefficient_map = MapSampler.texels(self.size, maps.sigma_a.shape[:2], wrap_u=texels.wrap_u, nearest=True)
         return TexturePrepared(texels, texel_lights, camera.mask, uv, pixel_shading(scene, plan, camera, pixel_lights),
                                stretch, schedule, plan.on(Pass.TRANSLUCENT_SHADOW_MAPS), margin, colour_map,
                                coefficient_map)

@@ -290,6 +290,30 @@ def test_a_uniform_map_of_another_medium_is_lit_by_that_mediums_laws(tmp_path, m
     np.testing.assert_allclose(frame[lit], reference[lit], rtol=tolerance)
 
 
+def test_light_falls_monotonically_across_a_magnified_edge(tmp_path):
+    """Under uniform light the exitance falls from the clear medium to the absorbing one: the
+    clear side loses light into its neighbour near the edge and the absorbing side gains it
+    (the two-media walk's profile). A map coarser than the texture, read bilinearly, had put
+    texels whose blend straddles the edge: read as a medium halfway between, such a texel stood
+    out as a bright line (a 19 % rise here); with only the exit side read whole, the clear side
+    dipped below the absorbing one (a 13 % rise after the dip). Parameter maps are now read
+    whole, one medium per map texel."""
+    sigma_a = _stripes([0.002, 0.004, 0.007], [0.2, 0.3, 0.5])  # a 32 x 32 map on a finer texture
+    data = flat_plane({"name": "marble"}, texture_size=256)
+    scene = _scene(tmp_path, {"sigma_a": _write(tmp_path, "sa.exr", sigma_a)}, scene=data)
+    plan = plan_scene(scene, method=Method.TEXTURE_SPACE)
+    assert plan.method_config.size >= 4 * SIZE and plan.basis.size > 1  # the map magnified, two media
+    params = render_params(scene, plan, dtype=jnp.float64)
+    prepared = plan.method_config.prepare(scene, plan, params)
+    exitance = np.asarray(plan.method_config.exitance(params, prepared))
+    x, y = prepared.texels.position[..., 0], prepared.texels.position[..., 1]
+    row = np.argmin(np.abs(y[:, 0]))
+    near = prepared.texels.mask[row] & (np.abs(x[row]) < 4.0)
+    profile = exitance[row][near][np.argsort(x[row][near])]  # from the clear side to the absorbing one
+    steps = np.diff(profile, axis=0) / profile[:-1]
+    assert np.all(steps < 1e-3), f"the exitance rises by {100 * steps.max():.1f} % somewhere across the edge"
+
+
 def test_image_space_and_texture_space_agree_across_a_parameter_edge(tmp_path):
     """Two methods that share only the blend: Mertens' samples with each entry point's profile
     against texture space's blur of a_k E, on a checker of two media (light crosses the edge)."""
