@@ -52,6 +52,7 @@ from .. import transport as _transport
 from ..gaussians.gaussian_sum import GaussianSum
 from ..materials import jensen2001, jensen2001_names
 from ..medium import Medium
+from . import budget
 from . import mesh as _mesh
 from .artist_maps import coefficients_from_artist_maps
 from .lighting import Light
@@ -200,25 +201,36 @@ _SECTIONS = ("geometry", "material", "lights", "camera", "render")
 _SHAPES = ("sphere", "plane", "box", "fin", "obj")
 
 
+def _segments(t: _Table, key: str, default: int, triangles) -> int:
+    """An integer tessellation count, refused before the mesh is built when its ``triangles(n)``
+    would not fit in memory (:mod:`jsss.render.budget`)."""
+    n = t.number(key, default, integer=True, positive=True)
+    problem = budget.check_size(triangles(n), budget.BYTES_PER_TRIANGLE, f"{n:,} {key} ({triangles(n):,.0f} triangles)")
+    if problem:
+        t.fail(key, problem)
+    return n
+
+
 def _geometry(t: _Table, base_dir: Path) -> _mesh.Mesh:
     shape = t.string("shape", _SHAPES)
     try:
         if shape == "sphere":
-            m = _mesh.uv_sphere(t.number("radius", 10.0, positive=True),
-                                segments=t.number("segments", 96, integer=True, positive=True),
-                                rings=t.number("rings", 48, integer=True, positive=True))
+            radius = t.number("radius", 10.0, positive=True)
+            rings = _segments(t, "rings", 48, lambda n: 2 * 3 * n)  # at least 3 segments a ring
+            segments = _segments(t, "segments", 96, lambda n: 2 * n * rings)
+            m = _mesh.uv_sphere(radius, segments=segments, rings=rings)
         elif shape == "plane":
             width = t.number("width", 40.0, positive=True)
             m = _mesh.plane(width, t.number("depth", width, positive=True),
-                            segments=t.number("segments", 1, integer=True, positive=True))
+                            segments=_segments(t, "segments", 1, lambda n: 2 * n * n))
         elif shape == "box":
             m = _mesh.box(t.vector("size", 3, (20.0, 20.0, 20.0), positive=True, scalar_ok=True),
-                          segments=t.number("segments", 8, integer=True, positive=True))
+                          segments=_segments(t, "segments", 8, lambda n: 12 * n * n))
         elif shape == "fin":
             m = _mesh.fin(t.number("height", 30.0, positive=True), t.number("radius", 40.0, positive=True),
                           t.number("thickness", 2.0, positive=True),
                           arc_degrees=t.number("arc_degrees", 60.0, positive=True),
-                          segments=t.number("segments", 32, integer=True, positive=True))
+                          segments=_segments(t, "segments", 32, lambda n: 8 * n * n))
         else:
             path = Path(t.string("path"))
             m = _mesh.load_obj(path if path.is_absolute() else base_dir / path)
@@ -229,18 +241,42 @@ def _geometry(t: _Table, base_dir: Path) -> _mesh.Mesh:
     scale = t.number("scale", 1.0, positive=True)
     translate = t.vector("translate", 3, (0.0, 0.0, 0.0))
     t.check_unknown()
+    size = float(np.ptp(np.asarray(m.vertices, float), axis=0).max())
+    if not size > 0:
+        t.fail("shape", "the mesh has no extent: every vertex is at one point.")
+    extent = size * scale
+    if not MIN_EXTENT <= extent <= MAX_EXTENT:
+        t.fail("scale", f"{scale:g} makes the object {extent:.3g} mm across; jsss works in millimetres, from "
+                        f"{MIN_EXTENT:g} mm to {MAX_EXTENT:g} mm (a scale of {MAX_EXTENT / size:.3g} at most "
+                        f"and {MIN_EXTENT / size:.3g} at least).")
+    if np.any(np.abs(translate) > MAX_EXTENT):
+        t.fail("translate", f"must lie within {MAX_EXTENT:g} mm of the origin; got {translate.tolist()}.")
     if scale != 1.0 or np.any(translate != 0):
         m = m.transformed(scale=scale, translate=translate)
     return m
 
 
+MIN_EXTENT, MAX_EXTENT = 1e-3, 1e7  # mm: a micron to ten kilometres, where float32 still resolves a profile
+ETA_RANGE = (0.5, 4.0)  # relative indices of refraction a material may have (water 1.33, diamond 2.42)
+MAX_ROUGHNESS = 1.0  # Beckmann slope RMS m: 1 is already a matte, 45-degree facet spread
+MAX_RADIANT = 1e15  # colour x intensity: the frame multiplies it by factors up to ~1e20 and float32 ends at 3e38
+
+
 def _medium(t: _Table, prefix: str = "") -> Medium:
     sigma_a = t.vector("sigma_a", 3, nonnegative=True, scalar_ok=True)
     sigma_s = t.vector("sigma_s_prime", 3, nonnegative=True, scalar_ok=True)
-    eta = t.vector("eta", 3, (1.3, 1.3, 1.3), positive=True, scalar_ok=True)
+    eta = _eta(t, "eta")
     if np.any(sigma_a + sigma_s <= 0):
         t.fail("sigma_s_prime", "sigma_a + sigma_s_prime must be > 0 in every channel (no medium otherwise).")
     return Medium(sigma_a, sigma_s, eta)
+
+
+def _eta(t: _Table, key: str):
+    eta = t.vector(key, 3, (1.3, 1.3, 1.3), positive=True, scalar_ok=True)
+    if np.any(eta <= ETA_RANGE[0]) or np.any(eta >= ETA_RANGE[1]):
+        t.fail(key, f"a relative index of refraction must lie in ({ETA_RANGE[0]:g}, {ETA_RANGE[1]:g}) "
+                    f"(water 1.33, skin 1.4, marble 1.5); got {eta.tolist()}.")
+    return eta
 
 
 def _maps(t: _Table, material: Material, texturing: str, base_dir: Path) -> SurfaceMaps:
@@ -303,6 +339,9 @@ def _maps(t: _Table, material: Material, texturing: str, base_dir: Path) -> Surf
 def _material(t: _Table, source: str, base_dir: Path = Path(".")) -> Material:
     surface = dict(specular=t.number("specular", 1.0, nonnegative=True),
                    roughness=t.number("roughness", 0.35, positive=True))
+    if surface["roughness"] > MAX_ROUGHNESS:
+        t.fail("roughness", f"is Beckmann's slope RMS m and must lie in (0, {MAX_ROUGHNESS:g}] (0.25-0.35 for "
+                            f"polished stone and skin); got {surface['roughness']:g}.")
     forms = [k for k in ("name", "sigma_a", "preset", "layers", "gaussians") if t.has(k)]
     if len(forms) != 1:
         t.fail("name", "give exactly one of name, sigma_a/sigma_s_prime/eta, preset, layers or gaussians; "
@@ -316,6 +355,9 @@ def _material(t: _Table, source: str, base_dir: Path = Path(".")) -> Material:
         material = Material(name, np.asarray(medium.eta), medium=medium, **surface)
     elif form == "sigma_a":
         medium = _medium(t)
+        if np.any(np.asarray(medium.sigma_s_prime) <= 0):
+            t.fail("sigma_s_prime", "must be > 0 in every channel: a medium that scatters nothing returns no "
+                                    f"light from below its surface; got {np.asarray(medium.sigma_s_prime).tolist()}.")
         material = Material("custom", np.asarray(medium.eta), medium=medium, **surface)
     elif form == "preset":
         t.string("preset", ("skin",))
@@ -346,7 +388,7 @@ def _material(t: _Table, source: str, base_dir: Path = Path(".")) -> Material:
             gt.fail("variances", f"must be positive and increasing [mm^2]; got {variances.tolist()}.")
         if weights.shape != (len(variances), 3) or np.any(weights < 0):
             gt.fail("weights", f"must be {len(variances)} non-negative [r, g, b] rows; got shape {weights.shape}.")
-        eta = gt.vector("eta", 3, (1.3, 1.3, 1.3), positive=True, scalar_ok=True)
+        eta = _eta(gt, "eta")
         gt.check_unknown()
         material = Material("given Gaussians", eta, gaussians=GaussianSum(weights, variances), **surface)
     if t.has("profile") or t.has("g"):
@@ -376,6 +418,10 @@ def _light(t: _Table) -> Light:
     kind = t.string("type", ("point", "directional"))
     color = tuple(t.vector("color", 3, (1.0, 1.0, 1.0), nonnegative=True))
     intensity = t.number("intensity", 1.0, nonnegative=True)
+    if intensity * max(color) > MAX_RADIANT:
+        t.fail("intensity", f"{intensity:g} times the colour's {max(color):g} exceeds {MAX_RADIANT:g}: the frame "
+                            "would overflow float32 once multiplied by the shading; scale the light and the "
+                            "exposure down together.")
     if kind == "point":
         light = Light("point", color, intensity, position=tuple(t.vector("position", 3)))
     else:
@@ -398,9 +444,25 @@ def _camera(t: _Table) -> PerspectiveView:
     resolution = t.vector("resolution", 2, (320, 240), positive=True)
     if np.any(resolution != np.round(resolution)):
         t.fail("resolution", f"must be two integers; got {resolution.tolist()}.")
+    width, height = int(resolution[0]), int(resolution[1])
+    problem = budget.check_size(width * height, budget.BYTES_PER_PIXEL, f"{width} x {height} pixels",
+                                largest=f"{{}} pixels, e.g. {_square(budget.available_memory() / 2 / budget.BYTES_PER_PIXEL)}")
+    if problem:
+        t.fail("resolution", problem)
     up = t.vector("up", 3, (0.0, 0.0, 1.0))
+    view = look_at - position
+    cross = np.linalg.norm(np.cross(up, view))
+    if not cross > 1e-6 * np.linalg.norm(up) * np.linalg.norm(view):
+        what = "is the zero vector" if not np.any(up) else f"{up.tolist()} is parallel to the view direction"
+        t.fail("up", f"{what}: the camera needs an up across the view (look_at - position = {view.tolist()}); "
+                     "e.g. [0, 0, 1] unless the camera looks straight up or down.")
     t.check_unknown()
     return PerspectiveView(tuple(position), tuple(look_at), fov, int(resolution[0]), int(resolution[1]), tuple(up))
+
+
+def _square(count: float) -> str:
+    side = int(np.sqrt(max(count, 0.0)))
+    return f"{side} x {side}"
 
 
 def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".") -> Scene:
@@ -422,7 +484,16 @@ def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".") -> Scene:
     texture_size = r.number("texture_size", 512, integer=True, positive=True)
     if texture_size < 16 or texture_size > 8192:
         r.fail("texture_size", f"must lie in [16, 8192]; got {texture_size}.")
+    problem = budget.check_size(texture_size**2, budget.BYTES_PER_TEXEL, f"a {texture_size}^2 texture",
+                                largest=f"{{}} texels, {_square(budget.available_memory() / 2 / budget.BYTES_PER_TEXEL)}")
+    if problem:
+        r.fail("texture_size", problem)
     shadow = r.number("shadow_map_size", 512, integer=True, positive=True)
+    problem = budget.check_size(len(lights) * shadow**2, budget.BYTES_PER_SHADOW_TEXEL,
+                                f"{len(lights)} shadow map(s) of {shadow}^2",
+                                largest=f"{{}} texels, {_square(budget.available_memory() / 2 / budget.BYTES_PER_SHADOW_TEXEL / len(lights))} each")
+    if problem:
+        r.fail("shadow_map_size", problem)
     exposure = r.number("exposure", None, positive=True)
     r.check_unknown()
     root.check_unknown()

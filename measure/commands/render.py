@@ -19,12 +19,23 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
+import traceback
 from pathlib import Path
 
-from ._console import Progress, UsageError, add_commands, error_line, exit_status, start, version, \
-    write_atomically, write_text
+from ._console import (
+    Progress,
+    UsageError,
+    add_commands,
+    error_line,
+    exit_status,
+    start,
+    version,
+    write_atomically,
+    write_text,
+)
 
 __all__ = ["main", "parser"]
 
@@ -168,6 +179,15 @@ def _render(args) -> int:
             print(error_line(PROG, error), file=sys.stderr)
             failed += 1
             continue
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as error:  # noqa: BLE001 -- a bug must not stop the other scenes, nor print a traceback
+            if os.environ.get("JSSS_DEBUG"):
+                traceback.print_exc()
+            print(f"{PROG}: error: {scene_path}: {type(error).__name__} while rendering: {str(error).splitlines()[0] if str(error) else ''} "
+                  "(a bug in jsss: please report it with the scene; JSSS_DEBUG=1 prints the traceback)", file=sys.stderr)
+            failed += 1
+            continue
         print("wrote " + ", ".join(written), flush=True)
     return 2 if failed else 0
 
@@ -177,6 +197,7 @@ def _render_one(scene_path, output: Path, args, say) -> list[str]:
     import matplotlib.image
 
     from jsss.render import SceneError, load_scene, plan_scene, render
+    from jsss.render.budget import MAX_SAMPLES
     from jsss.render.passes import Method
     from jsss.render.shading import tone_map
     from measure.exr import write_exr
@@ -185,6 +206,9 @@ def _render_one(scene_path, output: Path, args, say) -> list[str]:
     scene = load_scene(scene_path)
     if args.accuracy is not None and not 0 < args.accuracy < 1:
         raise SceneError(f"--accuracy must lie in (0, 1); got {args.accuracy}.")
+    if args.samples is not None and not 1 <= args.samples <= MAX_SAMPLES:
+        raise SceneError(f"--samples {args.samples}: image-space samples per pixel must lie in [1, {MAX_SAMPLES}] "
+                         "(the calibration measures 8, 32 and 128).")
     method = None if args.method == "auto" else Method(args.method)
     say(f"{scene_path}: planning (fits the material's profile)")
     plan = plan_scene(scene, accuracy=args.accuracy, method=method, samples=args.samples,
@@ -193,6 +217,7 @@ def _render_one(scene_path, output: Path, args, say) -> list[str]:
         print(plan.describe(), flush=True)
     say(f"{scene_path}: rendering with {plan.method} (the first frame compiles: 10-20 s)")
     result = render(scene, plan, dtype=jnp.float64 if args.float64 else jnp.float32, time_passes=args.timings)
+    check_frame(result.radiance, scene_path)
     image, exposure = tone_map(result.radiance, exposure=scene.exposure)
     write_atomically(output, lambda tmp: matplotlib.image.imsave(tmp, image, format="png"))
     written = [str(output)]
@@ -206,6 +231,25 @@ def _render_one(scene_path, output: Path, args, say) -> list[str]:
             print(f"  {name:<28} {1000 * seconds:9.1f}")
     say(f"{scene_path}: done")
     return written
+
+
+def check_frame(radiance, scene_path) -> None:
+    """Refuse a frame that is not a picture, naming the likely cause: non-finite pixels (an
+    overflow or an unphysical material) or no light at all (the camera inside the object, or
+    every light behind it). Nothing is written for such a frame."""
+    import numpy as np
+
+    from jsss.render import SceneError
+
+    radiance = np.asarray(radiance)
+    bad = ~np.isfinite(radiance).all(-1)
+    if bad.any():
+        raise SceneError(f"{scene_path}: the frame has {int(bad.sum())} of {bad.size} pixels that are NaN or infinite: "
+                         "the material or the lights are outside what float32 can carry (try --float64, or smaller "
+                         "intensities and coefficients); nothing written.")
+    if not np.any(radiance > 0):
+        raise SceneError(f"{scene_path}: the frame is black: no lit surface faces the camera (is the camera inside "
+                         "the object, or every light behind it or below the surface?); nothing written.")
 
 
 # ----------------------------------------------------------------------------- fit
