@@ -21,6 +21,7 @@ import json
 import logging
 import math
 import re
+import os
 import sys
 import tempfile
 import time
@@ -411,12 +412,24 @@ def _fit_row(job, options) -> dict:
 _WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
+def _options(args) -> dict:
+    """The fit settings of a batch, as ``_fit_row`` takes them."""
+    return dict(pixel_mm=args.pixel_mm, eta=args.eta, reference_reflectance=args.reference_reflectance,
+                model=args.model, g=args.g, view_angle_deg=_view_angle(args), white_balance=args.white_balance)
+
+
+def _settings(job, options) -> str:
+    """The settings one row is fitted with (the batch's, with the manifest's overrides), as the
+    table's ``settings`` column records them: ``--resume`` keeps a row only where they match."""
+    effective = {**options, **job[3]}
+    return " ".join(f"{key}={effective[key]!r}" for key in sorted(effective))
+
+
 def _fitted(jobs, args):
     """Fit every job: in this process (one worker), on local Dask worker processes
     (``--workers N``) or on the cluster at ``--scheduler``. Yields ``(index, row)`` as each
     job finishes (in job order in this process, as they come on workers)."""
-    options = dict(pixel_mm=args.pixel_mm, eta=args.eta, reference_reflectance=args.reference_reflectance,
-                   model=args.model, g=args.g, view_angle_deg=_view_angle(args), white_balance=args.white_balance)
+    options = _options(args)
     if not jobs:
         return
     # The bar is the batch's record of how far it got: shown in logs too (not only on a terminal), unless -q.
@@ -458,23 +471,124 @@ def _fitted(jobs, args):
                 yield i, row
 
 
-def _resumed(jobs, out):
-    """Rows of ``out`` already fitted (status ok), by file, and the jobs still to run (``--resume``)."""
-    out = Path(out)
-    if not out.is_file():
-        return {}, jobs
+def _read_table(out: Path) -> list[dict]:
+    """The rows of a batch table (CSV, or Parquet with pyarrow); one line naming the file otherwise."""
     if out.suffix == ".parquet":
         try:
             import pyarrow.parquet as pq
         except ImportError:
             raise UsageError(f"{out}: resuming a .parquet table needs pyarrow") from None
-        old = pq.read_table(out).to_pylist()
-    else:
+        try:
+            return pq.read_table(out).to_pylist()
+        except Exception as error:  # noqa: BLE001 -- pyarrow's errors are many; the file is the user's
+            raise UsageError(f"{out}: cannot resume: not a readable Parquet table ({error})") from None
+    try:
         with out.open(newline="") as handle:
-            old = list(csv.DictReader(handle))
-    done = {row["file"]: row for row in old if row.get("status") == "ok"}
-    return {f: row for f, row in done.items() if f in {str(job[0]) for job in jobs}}, \
-        [job for job in jobs if str(job[0]) not in done]
+            rows = list(csv.DictReader(handle))
+    except (UnicodeDecodeError, csv.Error) as error:
+        raise UsageError(f"{out}: cannot resume: not a readable CSV table ({error})") from None
+    return rows
+
+
+def _resumed(jobs, settings, out):
+    """Rows already fitted (status ok) with the same settings, by position, and the positions
+    still to fit (``--resume``). Rows come from the table ``out`` and then its journal (rows
+    that finished after the table was last written: a batch killed outright). A row fitted
+    with other settings (another ``--eta``, say) is fitted again."""
+    out = Path(out)
+    old = _read_table(out) if out.is_file() else []
+    if old and "file" not in old[0]:
+        raise UsageError(f"{out}: cannot resume: the table has no 'file' column (not a fit-params batch table?); "
+                         "resume only a table this command wrote, or drop --resume to overwrite it")
+    old += _Journal(out).rows()
+    done = {}
+    for row in old:
+        if row.get("status") == "ok" and "file" in row:
+            done[(row["file"], row.get("settings"))] = row
+    kept, todo, other = {}, [], 0
+    for j, (job, setting) in enumerate(zip(jobs, settings)):
+        row = done.get((str(job[0]), setting))
+        if row is not None:
+            kept[j] = row
+        else:
+            todo.append(j)
+            other += any(file == str(job[0]) for file, _ in done)
+    return kept, todo, other
+
+
+class _Journal:
+    """Rows as they finish, one JSON line each, flushed to disk before the next fit starts:
+    ``OUT.journal`` beside the table. A batch killed outright (no ``finally`` runs) loses no
+    finished row; the table, written whole at the end, replaces the journal."""
+
+    def __init__(self, out: Path):
+        self.path = Path(str(out) + ".journal")
+        self.handle = None
+
+    def rows(self) -> list[dict]:
+        if not self.path.is_file():
+            return []
+        rows = []
+        for line in self.path.read_text().splitlines():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError:  # the line being written when the batch was killed
+                continue
+        return rows
+
+    def append(self, row: dict) -> None:
+        if self.handle is None:
+            self.handle = self.path.open("a")
+        self.handle.write(json.dumps(_finite(row), allow_nan=False) + "\n")
+        self.handle.flush()
+        os.fsync(self.handle.fileno())
+
+    def close(self, *, remove: bool) -> None:
+        if self.handle is not None:
+            self.handle.close()
+            self.handle = None
+        if remove:
+            self.path.unlink(missing_ok=True)
+
+
+def _finite(row: dict) -> dict:
+    """JSON has no NaN or Infinity: such values are null."""
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
+
+
+@contextlib.contextmanager
+def _locked(out: Path):
+    """Hold ``OUT.lock`` for the batch: a second batch writing the same table is refused at once
+    (two had both reported success, and one run's rows were gone)."""
+    import fcntl
+
+    lock = Path(str(out) + ".lock")
+    handle = lock.open("a")
+    try:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        raise UsageError(f"--out {out}: another fit-params batch is writing this table (it holds {lock}); "
+                         "wait for it, or write to another --out") from None
+    try:
+        yield
+    finally:
+        lock.unlink(missing_ok=True)
+        handle.close()
+
+
+def _check_out(out) -> Path:
+    """``--out`` before any fit: a .csv or .parquet file in an existing, writable folder."""
+    out = Path(out)
+    if out.is_dir():
+        raise UsageError(f"--out {out}: is a directory; give the table's file name (e.g. {out / 'table.csv'})")
+    if out.suffix not in (".csv", ".parquet"):
+        raise UsageError(f"--out {out}: the table is .csv (or .parquet with pyarrow); got {out.suffix or 'no suffix'}")
+    if not out.parent.is_dir():
+        raise UsageError(f"--out {out}: no such folder {out.parent}")
+    if not os.access(out.parent, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
+        raise UsageError(f"--out {out}: not writable")
+    return out
 
 
 def _write_table(rows, out):
@@ -500,6 +614,37 @@ def _write_table(rows, out):
     write_atomically(out, write)
 
 
+def _run_batch(jobs, settings, out: Path, args) -> list[dict]:
+    """Fit the jobs not kept from ``--resume``; every finished row goes to the journal at once
+    and the table (atomically) at most once a second and at the end."""
+    if args.resume:
+        kept, todo, other = _resumed(jobs, settings, out)
+    else:
+        _Journal(out).close(remove=True)  # a journal of an earlier, killed run is not this run's
+        kept, todo, other = {}, list(range(len(jobs))), 0
+    if kept or other:
+        print(f"resuming: {len(kept)} row(s) of {out} already fitted, {len(todo)} to fit"
+              + (f" ({other} fitted with other settings: fitted again)" if other else ""), file=sys.stderr)
+    rows = [kept.get(j) for j in range(len(jobs))]  # in job order; None: not fitted yet
+    journal = _Journal(out)
+    written, unwritten = time.monotonic(), False
+    try:
+        # Where each job still to fit sits in the table: by position, not by file, since a manifest
+        # may list one measurement twice (at two etas, say) and each is a row of its own.
+        for i, row in _fitted([jobs[j] for j in todo], args):
+            row = {**row, "settings": settings[todo[i]]}
+            journal.append(row)
+            rows[todo[i]], unwritten = row, True
+            if time.monotonic() - written >= 1.0:
+                _write_table([r for r in rows if r is not None], out)
+                written, unwritten = time.monotonic(), False
+    finally:
+        if unwritten or not todo:
+            _write_table([r for r in rows if r is not None], out)
+        journal.close(remove=True)  # the table holds every finished row (a failed write raised above)
+    return rows
+
+
 def _batch(args) -> int:
     """``fit-params batch``; returns the exit status (1 if any row failed).
 
@@ -510,24 +655,12 @@ def _batch(args) -> int:
         raise UsageError("batch needs a directory/glob or --manifest")
     if args.workers < 1:
         raise UsageError(f"--workers must be at least 1; got {args.workers}")
+    out = _check_out(args.out)
     jobs = _find_jobs(args.target, args.manifest)
-    kept, todo = _resumed(jobs, args.out) if args.resume else ({}, jobs)
-    if kept:
-        print(f"resuming: {len(kept)} row(s) of {args.out} already fitted, {len(todo)} to fit", file=sys.stderr)
-    rows = [kept.get(str(job[0])) for job in jobs]  # in job order; None: not fitted yet
-    # Where each job still to fit sits in the table: by position, not by file, since a manifest
-    # may list one measurement twice (at two etas, say) and each is a row of its own.
-    where = [j for j, row in enumerate(rows) if row is None]
-    written, unwritten = time.monotonic(), False
-    try:
-        for i, row in _fitted(todo, args):
-            rows[where[i]], unwritten = row, True
-            if time.monotonic() - written >= 1.0:
-                _write_table([r for r in rows if r is not None], args.out)
-                written, unwritten = time.monotonic(), False
-    finally:
-        if unwritten or not todo:
-            _write_table([r for r in rows if r is not None], args.out)
+    options = _options(args)
+    settings = [_settings(job, options) for job in jobs]
+    with _locked(out):
+        rows = _run_batch(jobs, settings, out, args)
     failed = [r for r in rows if r["status"] != "ok"]
     print(f"{len(rows) - len(failed)} fitted, {len(failed)} failed; table written to {args.out}")
     for r in failed:

@@ -330,3 +330,83 @@ def test_a_fitted_material_replaces_the_scenes_and_keeps_the_users_comments(tmp_
     assert load_scene(tmp_path / "new.toml").material.medium.eta.tolist() == [1.4, 1.4, 1.4]
     with pytest.raises(ValueError, match="profile must be 'dipole' or 'transport'"):
         fitted_material(medium, profile="pbd", g=0.0)
+
+
+# ----------------------------------------------------------------------------- batches lose nothing (issue 38)
+def _fake_batch(monkeypatch, folder, names=("a", "b", "c", "d")):
+    """Measurement files and a fake fit that records what it fitted (and at which eta)."""
+    for name in names:
+        (folder / f"{name}.exr").write_bytes(b"")
+    fitted = []
+
+    def fake_row(job, options):
+        fitted.append((job[0].name, options["eta"]))
+        return {"file": str(job[0]), "status": "ok", "error": "", "sigma_a_R": 0.01}
+
+    monkeypatch.setattr(fit_params, "_fit_row", fake_row)
+    return fitted
+
+
+def test_a_batch_killed_outright_loses_no_finished_row(monkeypatch, tmp_path, capsys):
+    """kill -9 runs no cleanup: every row finished before it is in OUT.journal, on disk, and
+    --resume takes it (no row had been written, and 13 finished fits were lost)."""
+    fitted = _fake_batch(monkeypatch, tmp_path)
+    out = tmp_path / "table.csv"
+    real_write = fit_params._write_table
+
+    def killed(rows, path):  # the process dies before any table is written
+        raise SystemError("killed")
+
+    monkeypatch.setattr(fit_params, "_write_table", killed)
+    with pytest.raises(SystemError):
+        fit_params.main(["batch", str(tmp_path), "--out", str(out), "-q"])
+    assert not out.exists() and len(fitted) == 4
+    monkeypatch.setattr(fit_params, "_write_table", real_write)
+    assert fit_params.main(["batch", str(tmp_path), "--out", str(out), "--resume", "-q"]) == 0
+    assert len(fitted) == 4  # nothing fitted again
+    assert [row["file"][-5:] for row in csv.DictReader(out.open())] == ["a.exr", "b.exr", "c.exr", "d.exr"]
+    assert not (tmp_path / "table.csv.journal").exists() and not (tmp_path / "table.csv.lock").exists()
+    assert "resuming: 4 row(s)" in capsys.readouterr().err
+
+
+def test_resume_refits_rows_fitted_with_other_settings(monkeypatch, tmp_path, capsys):
+    fitted = _fake_batch(monkeypatch, tmp_path, names=("a", "b"))
+    out = tmp_path / "table.csv"
+    assert fit_params.main(["batch", str(tmp_path), "--out", str(out), "--eta", "1.5", "-q"]) == 0
+    assert fit_params.main(["batch", str(tmp_path), "--out", str(out), "--eta", "1.3", "--resume", "-q"]) == 0
+    assert fitted == [("a.exr", 1.5), ("b.exr", 1.5), ("a.exr", 1.3), ("b.exr", 1.3)]
+    rows = list(csv.DictReader(out.open()))
+    assert len(rows) == 2 and all("eta=1.3" in row["settings"] for row in rows)
+    assert "2 fitted with other settings: fitted again" in capsys.readouterr().err
+    assert fit_params.main(["batch", str(tmp_path), "--out", str(out), "--eta", "1.3", "--resume", "-q"]) == 0
+    assert len(fitted) == 4  # the same settings: kept
+
+
+def test_two_batches_cannot_write_one_table(monkeypatch, tmp_path, capsys):
+    fitted = _fake_batch(monkeypatch, tmp_path, names=("a",))
+    out = tmp_path / "table.csv"
+    with fit_params._locked(out):  # another batch is running
+        assert fit_params.main(["batch", str(tmp_path), "--out", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--out {out}: another fit-params batch is writing this table" in err
+    assert fitted == [] and not out.exists()
+
+
+@pytest.mark.parametrize("where, message", [
+    ("folder", "is a directory"), ("table.txt", "the table is .csv"), ("missing/table.csv", "no such folder"),
+])
+def test_a_bad_out_is_refused_before_any_fit(monkeypatch, tmp_path, capsys, where, message):
+    fitted = _fake_batch(monkeypatch, tmp_path, names=("a",))
+    (tmp_path / "folder").mkdir()
+    assert fit_params.main(["batch", str(tmp_path), "--out", str(tmp_path / where), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and fitted == []
+
+
+def test_resuming_a_table_that_is_not_a_batch_table_names_it(monkeypatch, tmp_path, capsys):
+    fitted = _fake_batch(monkeypatch, tmp_path, names=("a",))
+    out = tmp_path / "table.csv"
+    out.write_text("name,value\nx,1\n")
+    assert fit_params.main(["batch", str(tmp_path), "--out", str(out), "--resume", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no 'file' column" in err and str(out) in err and fitted == []
