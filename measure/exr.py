@@ -6,7 +6,10 @@ or ``("Y",)``). Pixels are stored as ``"float"`` (32-bit) or ``"half"`` (16-bit)
 
 from __future__ import annotations
 
+import contextlib
 import os
+import struct
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -51,6 +54,65 @@ def _plain_attributes(header: dict) -> dict:
     return plain
 
 
+MAGIC = b"\x76\x2f\x31\x01"
+MAX_HEADER = 1 << 20  # bytes of attributes before the header must have ended
+
+
+def _header_size(path: Path) -> tuple[int, int, int]:
+    """(width, height, channels) from the file's own header, read with ``struct`` before
+    OpenEXR allocates anything: a 598-byte file that declares 100000^2 pixels had asked for
+    37 GiB. Raises ExrError for a file that is not an EXR or ends inside its header."""
+    with path.open("rb") as handle:
+        data = handle.read(MAX_HEADER)
+    if data[:4] != MAGIC:
+        raise ExrError(f"{path}: not an OpenEXR file (it does not start with the EXR magic number)")
+    position, window, count = 8, None, None
+    try:
+        while True:
+            end = data.index(b"\0", position)
+            name = data[position:end]
+            if not name:  # the empty name ends the header
+                break
+            type_end = data.index(b"\0", end + 1)
+            kind = data[end + 1:type_end]
+            (size,) = struct.unpack_from("<i", data, type_end + 1)
+            value = data[type_end + 5:type_end + 5 + size]
+            if len(value) < size or size < 0:
+                raise ValueError
+            if name == b"dataWindow" and kind == b"box2i":
+                window = struct.unpack("<4i", value[:16])
+            elif name == b"channels" and kind == b"chlist":  # (name, 16 bytes of type and sampling)..., 0
+                count, at = 0, 0
+                while value[at:at + 1] not in (b"", b"\0"):
+                    at = value.index(b"\0", at) + 17
+                    count += 1
+            position = type_end + 5 + size
+    except (ValueError, struct.error):
+        raise ExrError(f"{path}: truncated or not an OpenEXR file (its header ends early)") from None
+    if window is None:
+        raise ExrError(f"{path}: truncated or not an OpenEXR file (no dataWindow in its header)")
+    x0, y0, x1, y1 = window
+    return x1 - x0 + 1, y1 - y0 + 1, count or 1
+
+
+@contextlib.contextmanager
+def _stdout_to_stderr():
+    """OpenEXR's C++ library prints some warnings to stdout, which would corrupt a command's
+    ``--json``: send file descriptor 1 to stderr while it reads."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):  # no real stdout (a notebook, a test capture)
+        yield
+        return
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 def read_exr(path, channels: Sequence[str] | None = None, *, allow_nonfinite: bool = False) -> ExrImage:
     """Read an EXR image.
 
@@ -71,22 +133,34 @@ def read_exr(path, channels: Sequence[str] | None = None, *, allow_nonfinite: bo
     """
     import OpenEXR
 
+    from jsss.render.budget import check_size
+
     path = Path(path)
     if not path.is_file():
         raise ExrError(f"{path}: no such file")
+    width, height, count = _header_size(path)
+    if width < 1 or height < 1:
+        raise ExrError(f"{path}: its header declares {width} x {height} pixels")
+    # float32 channels as read, then float64 as returned: 12 bytes a channel
+    problem = check_size(width * height * count, 12, f"its header's {width} x {height} pixels x {count} channel(s)",
+                         largest="{:,} pixel values")
+    if problem:
+        raise ExrError(f"{path}: {problem}")
     try:
-        with OpenEXR.File(str(path), separate_channels=True) as exr:
+        with _stdout_to_stderr(), OpenEXR.File(str(path), separate_channels=True) as exr:
             header = dict(exr.header())
             available = {name: np.asarray(ch.pixels) for name, ch in exr.channels().items()}
     except Exception as error:  # OpenEXR raises RuntimeError with its own wording
-        raise ExrError(f"{path}: not a readable OpenEXR file ({error})") from None
+        raise ExrError(f"{path}: truncated or not a readable OpenEXR file ({error})") from None
     if channels is None:
         if all(c in available for c in "RGB"):
             channels = ("R", "G", "B")
         elif "Y" in available:
             channels = ("Y",)
         else:
-            channels = tuple(sorted(available))
+            channels = tuple(sorted(c for c in available if c != "A"))
+            if not channels:
+                raise ExrError(f"{path}: holds only an alpha channel (A); an image of light needs R, G, B or Y")
     missing = [c for c in channels if c not in available]
     if missing:
         raise ExrError(f"{path}: missing channel(s) {missing}; the file has {sorted(available)}")

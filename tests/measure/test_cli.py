@@ -154,7 +154,7 @@ def test_manifest_lists_measurements_and_one_measurement_twice_is_two_rows(measu
     "case, expected",
     [
         ("missing", "nope.exr: no such file"),
-        ("garbage", "not a readable OpenEXR"),
+        ("garbage", "not an OpenEXR file"),
         ("nan", "NaN/Inf"),
         ("saturated", "looks saturated"),
         ("eta", "--eta must be > 0"),
