@@ -158,9 +158,22 @@ def _read_tiff(path) -> ExrImage:
     return ExrImage(pixels, ("R", "G", "B"), _header(_exposure(seconds, iso)), path)
 
 
+def _png_header(path) -> tuple[int, int]:
+    """(bit depth, colour type) from a PNG's IHDR chunk, or (0, -1) where the file has none."""
+    with open(path, "rb") as handle:
+        head = handle.read(26)
+    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return 0, -1
+    return head[24], head[25]
+
+
 def _read_png(path) -> ExrImage:
     import imageio.v3 as iio
 
+    depth, colour = _png_header(path)
+    if depth == 16 and colour in (2, 6):  # Pillow decodes 16-bit colour samples to 8 bits
+        raise PhotoError(f"{path}: a 16-bit RGB PNG, whose colour samples Pillow (the PNG reader here) cuts to 8 "
+                         "bits; save the measurement as a 16-bit TIFF, raw or EXR (a 16-bit grey PNG reads exactly)")
     try:
         data = iio.imread(path, plugin="pillow")
         meta = iio.immeta(path, plugin="pillow")

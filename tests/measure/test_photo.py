@@ -154,3 +154,27 @@ def test_tiff_measurement_and_reference_at_different_exposures_fit_end_to_end(tm
     table = _fit(meas, "--reference", ref, "--pixel-mm", 0.05, "--eta", 1.3, "--json")
     np.testing.assert_allclose(table["sigma_a"], np.asarray(skin.sigma_a), rtol=0.05)
     np.testing.assert_allclose(table["sigma_s_prime"], np.asarray(skin.sigma_s_prime), rtol=0.05)
+
+
+def _png16_rgb(path, pixels):
+    """A valid 16-bit RGB PNG written by hand (Pillow writes none): IHDR, one IDAT, IEND."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    height, width, _ = pixels.shape
+    rows = b"".join(b"\0" + pixels[i].astype(">u2").tobytes() for i in range(height))
+    header = struct.pack(">IIBBBBB", width, height, 16, 2, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(rows))
+                     + chunk(b"IEND", b""))
+    return path
+
+
+def test_a_16_bit_rgb_png_is_named_for_what_it_is(tmp_path):
+    """Pillow cuts 16-bit colour samples to 8 bits: such a file had been refused as "8-bit".
+    It is named as a 16-bit RGB PNG, with what to save instead."""
+    pixels = (np.random.default_rng(0).random((6, 5, 3)) * 65535).astype(np.uint16)
+    with pytest.raises(PhotoError, match="16-bit RGB PNG.*16-bit TIFF, raw or EXR"):
+        read_image(_png16_rgb(tmp_path / "rgb16.png", pixels))
