@@ -211,7 +211,21 @@ def _segments(t: _Table, key: str, default: int, triangles) -> int:
     return n
 
 
-def _geometry(t: _Table, base_dir: Path) -> _mesh.Mesh:
+def _inside(t: _Table, key: str, path: Path, base_dir: Path, allow_outside: bool) -> Path:
+    """``path`` as the scene names it, resolved against the scene's folder; one that leaves the
+    folder (an absolute path, ``..``) only where the user allows it: a scene from elsewhere must
+    not make jsss read any file it names."""
+    full = path if path.is_absolute() else base_dir / path
+    if not allow_outside:
+        try:
+            full.resolve().relative_to(base_dir.resolve())
+        except ValueError:
+            t.fail(key, f"{path} is outside the scene's folder {base_dir}; move it beside the scene, or allow "
+                        "paths outside (jsss-render --allow-outside-paths, parse_scene(allow_outside=True)).")
+    return full
+
+
+def _geometry(t: _Table, base_dir: Path, allow_outside: bool = False) -> _mesh.Mesh:
     shape = t.string("shape", _SHAPES)
     try:
         if shape == "sphere":
@@ -232,8 +246,7 @@ def _geometry(t: _Table, base_dir: Path) -> _mesh.Mesh:
                           arc_degrees=t.number("arc_degrees", 60.0, positive=True),
                           segments=_segments(t, "segments", 32, lambda n: 8 * n * n))
         else:
-            path = Path(t.string("path"))
-            m = _mesh.load_obj(path if path.is_absolute() else base_dir / path)
+            m = _mesh.load_obj(_inside(t, "path", Path(t.string("path")), base_dir, allow_outside))
     except ValueError as error:
         if isinstance(error, SceneError):
             raise
@@ -279,13 +292,13 @@ def _eta(t: _Table, key: str):
     return eta
 
 
-def _maps(t: _Table, material: Material, texturing: str, base_dir: Path) -> SurfaceMaps:
+def _maps(t: _Table, material: Material, texturing: str, base_dir: Path, allow_outside: bool = False) -> SurfaceMaps:
     """Read ``[material.maps]``: the colour map and the parameter maps, checked against the material."""
     files = {}
     for key in MAP_KEYS:
         if t.has(key):
             path = Path(t.string(key))
-            files[key] = path if path.is_absolute() else base_dir / path
+            files[key] = _inside(t, key, path, base_dir, allow_outside)
     t.check_unknown(MAP_KEYS)
     if not files:
         t.fail("albedo", f"give at least one map: {', '.join(MAP_KEYS)}.")
@@ -336,7 +349,7 @@ def _maps(t: _Table, material: Material, texturing: str, base_dir: Path) -> Surf
     return SurfaceMaps(read.get("albedo"), sigma_a, sigma_s, texturing, tuple((k, str(p)) for k, p in files.items()))
 
 
-def _material(t: _Table, source: str, base_dir: Path = Path(".")) -> Material:
+def _material(t: _Table, source: str, base_dir: Path = Path("."), allow_outside: bool = False) -> Material:
     surface = dict(specular=t.number("specular", 1.0, nonnegative=True),
                    roughness=t.number("roughness", 0.35, positive=True))
     if surface["roughness"] > MAX_ROUGHNESS:
@@ -408,7 +421,7 @@ def _material(t: _Table, source: str, base_dir: Path = Path(".")) -> Material:
         t.fail("normalize_profile", f"must be true or false; got {normalize!r}.")
     material = dataclasses.replace(material, normalize_profile=normalize)
     if t.has("maps"):
-        maps = _maps(_Table(t.raw("maps"), "material.maps", source), material, texturing, base_dir)
+        maps = _maps(_Table(t.raw("maps"), "material.maps", source), material, texturing, base_dir, allow_outside)
         material = dataclasses.replace(material, maps=maps)
     t.check_unknown()
     return material
@@ -465,13 +478,14 @@ def _square(count: float) -> str:
     return f"{side} x {side}"
 
 
-def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".") -> Scene:
-    """Build a :class:`Scene` from a TOML-shaped dict (see the module docstring)."""
+def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".", allow_outside: bool = False) -> Scene:
+    """Build a :class:`Scene` from a TOML-shaped dict (see the module docstring). Files the scene
+    names (an OBJ, maps) must lie in ``base_dir`` unless ``allow_outside``."""
     root = _Table(data, "scene", source)
     # Unknown sections first: a misspelt [materail] must not be reported as a missing [material].
     root.check_unknown(_SECTIONS)
-    mesh = _geometry(_Table(root.raw("geometry"), "geometry", source), Path(base_dir))
-    material = _material(_Table(root.raw("material"), "material", source), source, Path(base_dir))
+    mesh = _geometry(_Table(root.raw("geometry"), "geometry", source), Path(base_dir), allow_outside)
+    material = _material(_Table(root.raw("material"), "material", source), source, Path(base_dir), allow_outside)
     entries = root.raw("lights")
     if not isinstance(entries, list) or not entries:
         root.fail("lights", "must be a non-empty array of tables ([[lights]]).")
@@ -500,8 +514,9 @@ def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".") -> Scene:
     return Scene(mesh, material, lights, camera, accuracy, texture_size, shadow, exposure, source)
 
 
-def load_scene(path) -> Scene:
-    """Read a TOML scene file; relative OBJ and map paths are resolved next to it."""
+def load_scene(path, *, allow_outside: bool = False) -> Scene:
+    """Read a TOML scene file; relative OBJ and map paths are resolved next to it, and must stay
+    in its folder unless ``allow_outside``."""
     path = Path(path)
     try:
         with open(path, "rb") as f:
@@ -510,4 +525,4 @@ def load_scene(path) -> Scene:
         raise SceneError(f"{path}: no such scene file.") from None
     except tomllib.TOMLDecodeError as error:
         raise SceneError(f"{path}: not valid TOML ({error}).") from None
-    return parse_scene(data, source=str(path), base_dir=path.parent)
+    return parse_scene(data, source=str(path), base_dir=path.parent, allow_outside=allow_outside)

@@ -91,6 +91,8 @@ def _render_options(methods) -> argparse.ArgumentParser:
     options.add_argument("--normal-filter", default="spectral", choices=("spectral", "naive"),
                          help="which Patro filter --method normal-filtering uses")
     options.add_argument("--float64", action="store_true", help="render in float64 (default float32)")
+    options.add_argument("--allow-outside-paths", action="store_true",
+                         help="let a scene name files (OBJ, maps) outside its own folder")
     options.add_argument("--no-exr", action="store_true", help="write only the PNG")
     options.add_argument("-q", "--quiet", action="store_true",
                          help="no progress lines (they go to stderr, and only when it is a terminal)")
@@ -141,6 +143,8 @@ def _fit_parser(commands, methods):
     p.add_argument("--rim-mm", type=float, default=0.0,
                    help="leave out pixels within this distance [mm] of an open surface's rim (default 0)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument("--allow-outside-paths", action="store_true",
+                   help="let the scene name files (OBJ, maps) outside its own folder")
     p.add_argument("--version", action="version", version=version(f"{PROG} fit"))
     p.set_defaults(run=_fit, prog=f"{PROG} fit")
 
@@ -203,7 +207,7 @@ def _render_one(scene_path, output: Path, args, say) -> list[str]:
     from measure.exr import write_exr
 
     say(f"{scene_path}: loading the scene")
-    scene = load_scene(scene_path)
+    scene = load_scene(scene_path, allow_outside=args.allow_outside_paths)
     if args.accuracy is not None and not 0 < args.accuracy < 1:
         raise SceneError(f"--accuracy must lie in (0, 1); got {args.accuracy}.")
     if args.samples is not None and not 1 <= args.samples <= MAX_SAMPLES:
@@ -320,7 +324,7 @@ def _fit(args) -> int:
     from ._scene_files import fitted_material, scene_with_material
 
     say(f"{args.scene}: loading the scene and the photo")
-    scene = load_scene(args.scene)
+    scene = load_scene(args.scene, allow_outside=args.allow_outside_paths)
     photo = read_image(args.photo).pixels
     if photo.ndim == 3 and photo.shape[2] >= 3:
         photo = photo[..., :3]

@@ -146,3 +146,22 @@ def test_the_camera_inside_the_object_is_a_black_frame_named_without_warnings(tm
     assert status == 2 and len(err.strip().splitlines()) == 1, err
     assert "black" in err and "camera inside the object" in err and "Warning" not in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("where", ["absolute", "parent"])
+def test_a_mesh_or_map_outside_the_scenes_folder_is_read_only_when_allowed(tmp_path, capsys, where):
+    """A scene from elsewhere must not make jsss read any file it names."""
+    folder = tmp_path / "scene"
+    folder.mkdir()
+    (tmp_path / "outside.obj").write_text("v 0 0 0\nv 10 0 0\nv 0 10 0\nvt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\n"
+                                          "f 1/1/1 2/2/1 3/3/1\n")
+    path = str(tmp_path / "outside.obj") if where == "absolute" else "../outside.obj"
+    scene = _scene(folder, "case", lambda data: data.__setitem__("geometry", {"shape": "obj", "path": path}))
+    out = tmp_path / "out.png"
+    assert render_command.main([str(scene), "-o", str(out), "-q", "--method", "lambert"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "[geometry] path" in err and "outside the scene's folder" in err
+    assert "--allow-outside-paths" in err
+    render_command.main([str(scene), "-o", str(out), "-q", "--method", "lambert", "--allow-outside-paths"])
+    err = capsys.readouterr().err
+    assert "outside the scene's folder" not in err  # read; whatever the frame of one triangle gives
