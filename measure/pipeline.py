@@ -48,6 +48,35 @@ class MeasurementFit:
                               self.channels, field_mm=self.field_mm, quality=self.quality)
 
     @property
+    def failures(self) -> list[str]:
+        """Why the fit is not a result, one reason per failing channel (empty for a result): a
+        non-finite estimate or error; an error of exactly 0, where the search ended at the edge
+        of its range and the data do not constrain the parameter (``--pixel-mm 1e30`` had
+        printed sigma_a 1.0955 +- 0); a total diffuse reflectance above 1, which no material
+        returns (a measurement scaled x1000 had printed R_d 1.017)."""
+        f = self.fit
+        values = {"sigma_a": f.medium.sigma_a, "sigma_s_prime": f.medium.sigma_s_prime}
+        errors = {"sigma_a": f.sigma_a_err, "sigma_s_prime": f.sigma_s_prime_err}
+        total = np.asarray(f.total_reflectance, float).reshape(-1)
+        reasons = []
+        for c, channel in enumerate(self.channels):
+            for name in values:
+                value = float(np.asarray(values[name], float).reshape(-1)[c])
+                error = float(np.asarray(errors[name], float).reshape(-1)[c])
+                if not (np.isfinite(value) and np.isfinite(error)):
+                    reasons.append(f"channel {channel}: {name} {value:.4g} +- {error:.2g} is not finite")
+                    break
+                if error <= 0:
+                    reasons.append(f"channel {channel}: {name} {value:.4g} +- 0: the fit ended at the edge of its "
+                                   "range, where the data do not constrain it")
+                    break
+            else:
+                if not total[c] <= 1:
+                    reasons.append(f"channel {channel}: total diffuse reflectance {total[c]:.4g} > 1, which no "
+                                   "material returns")
+        return reasons
+
+    @property
     def quality(self) -> list[str]:
         """Per channel ``"ok"`` or ``"poor: ..."`` from chi^2/dof (:func:`measure.checks.fit_quality`)."""
         return fit_quality(self.fit.chi2_reduced)

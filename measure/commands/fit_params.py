@@ -162,6 +162,9 @@ def _fit(args) -> int:
         raise UsageError("give a MEASUREMENT.exr (with --reference), or --demo, or 'batch'")
     if not args.reference:
         raise UsageError("--reference REF.exr is required (or use --demo)")
+    if args.saturation is not None and not (math.isfinite(args.saturation) and args.saturation > 0):
+        raise UsageError(f"--saturation must be > 0 (the pixel value at which the camera clipped); "
+                         f"got {args.saturation:g}")
     say(f"reading {len(args.measurement)} frame(s), the reference{' and the dark frame' if args.dark else ''}")
     fit = _read_and_fit(args.measurement, args.reference, dark=args.dark, saturation=args.saturation,
                         white_balance=args.white_balance)
@@ -173,9 +176,21 @@ def _fit(args) -> int:
     start()
     say(f"fitting {args.model} (the first fit compiles: 10-20 s)")
     result = fit_model(args.model)
+    _refuse_failed(result, Path(args.measurement[0]))
     comparison = _dipole_bias(result, lambda: fit_model("transport")) if args.model == "dipole" else None
     _report(result, args, extra=comparison, stem=Path(args.measurement[0]).stem)
     return 0
+
+
+LIKELY_CAUSES = ("check --pixel-mm (or the EXR's pixel size), --eta, --reference-reflectance and that the "
+                 "measurement and the reference share their exposure")
+
+
+def _refuse_failed(result, measurement: Path) -> None:
+    """A fit that is not a result ends the command in one line (exit 2) naming its reasons."""
+    reasons = result.failures
+    if reasons:
+        raise UsageError(f"{measurement}: the fit failed: {'; '.join(reasons)}; {LIKELY_CAUSES}")
 
 
 def _read_and_fit(measurement, reference, **read_options):
@@ -321,7 +336,7 @@ def _report(result, args, truth=None, extra=None, stem="fitted"):
     if args.json:
         if truth is not None:
             table = {**table, "truth": truth}
-        print(json.dumps(table, indent=2))
+        print(json.dumps(_json_safe(table), indent=2, allow_nan=False))
         return
     print(_format_table(table))
     if truth is not None:
@@ -394,6 +409,8 @@ def _fit_row(job, options) -> dict:
         result = fit(overrides.get("eta", options["eta"]), pixel_mm=overrides.get("pixel_mm", options["pixel_mm"]),
                      reference_reflectance=overrides.get("reference_reflectance", options["reference_reflectance"]),
                      model=options["model"], g=options["g"], view_angle_deg=options["view_angle_deg"])
+        if result.failures:
+            raise UsageError(f"the fit failed: {'; '.join(result.failures)}; {LIKELY_CAUSES}")
         table = result.table()
         for key in _ROW_KEYS:
             for ch, value in zip(table["channels"], table[key]):
@@ -553,7 +570,19 @@ class _Journal:
 
 def _finite(row: dict) -> dict:
     """JSON has no NaN or Infinity: such values are null."""
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
+    return _json_safe(row)
+
+
+def _json_safe(value):
+    """``value`` with every non-finite float (nested in dicts and lists) as None: JSON has no
+    NaN or Infinity, and a reader would refuse the whole output."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    return value
 
 
 @contextlib.contextmanager

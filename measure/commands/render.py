@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -323,6 +324,9 @@ def _fit(args) -> int:
 
     from ._scene_files import fitted_material, scene_with_material
 
+    if args.saturation is not None and not (math.isfinite(args.saturation) and args.saturation > 0):
+        raise UsageError(f"--saturation must be > 0 (the pixel value at which the camera clipped); "
+                         f"got {args.saturation:g}")
     say(f"{args.scene}: loading the scene and the photo")
     scene = load_scene(args.scene, allow_outside=args.allow_outside_paths)
     photo = read_image(args.photo).pixels

@@ -10,7 +10,7 @@ import pytest
 
 from jsss import hankel
 from jsss.materials import jensen2001
-from measure.exr import write_exr
+from measure.exr import read_exr, write_exr
 from measure.synth import synthesize, write_measurement
 
 
@@ -168,6 +168,12 @@ def test_manifest_lists_measurements_and_one_measurement_twice_is_two_rows(measu
         ("narrow", "the measurement is narrower than its reference beam"),
         ("bad_reflectance", "--reference-reflectance must be in (0, 1] (0.99 for Spectralon); got nan"),
         ("unit", "--unit-mm must be > 0 (millimetres per scene unit: 1 for mm, 1000 for metres); got 0"),
+        # issue 38: fits at the edge of their range are not results (each had printed numbers, exit 0)
+        ("pixel_huge", "the fit failed: channel R: sigma_a"),  # had been sigma_a 1.0955 +- 0
+        ("reflectance_tiny", "+- 0: the fit ended at the edge of its range"),  # had been sigma_a 100 +- 0
+        ("eta_10", "is not finite"),  # had been sigma 500, R_d 979.8 and NaN in the --json output
+        ("scaled", "which no material returns"),  # a measurement x1000 had been R_d 1.017
+        ("saturation", "--saturation must be > 0"),  # had been ignored
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path):
@@ -210,6 +216,18 @@ def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path
         args = [d / "skin1.exr", "--reference", ref, "--reference-reflectance", "nan"]
     elif case == "unit":
         args = [d / "skin1.exr", "--reference", ref, "--export", "pbrt", "--unit-mm", 0]
+    elif case == "pixel_huge":
+        args = [d / "skin1.exr", "--reference", ref, "--pixel-mm", 1e30]
+    elif case == "reflectance_tiny":
+        args = [d / "skin1.exr", "--reference", ref, "--reference-reflectance", 1e-9]
+    elif case == "eta_10":
+        args = [d / "skin1.exr", "--reference", ref, "--eta", 10, "--model", "dipole", "--json"]
+    elif case == "scaled":
+        image = read_exr(d / "skin1.exr")
+        args = [write_exr(tmp_path / "bright.exr", 1000 * image.pixels, attributes=image.header), "--reference", ref,
+                "--dark", d / "skin1_dark.exr"]
+    elif case == "saturation":
+        args = [d / "skin1.exr", "--reference", ref, "--saturation", -1]
     else:
         args = [write_exr(tmp_path / "small.exr", np.ones((8, 8, 3))), "--reference", ref, "--pixel-mm", 0.05]
     out = run(*args)
@@ -238,12 +256,13 @@ def test_batch_names_a_missing_directory(tmp_path):
 
 
 def test_wrong_eta_warns_and_records_a_poor_quality(measurements):
-    """skin1 (eta 1.3) fitted at eta 1.1: chi^2/dof in the tens to hundreds (measured 28-843
+    """skin1 (eta 1.3) fitted at eta 1.15: chi^2/dof in the thousands (measured 1.1e3-2.5e3
     on 256-pixel images); before, no word of warning. Now one warning line per channel names
-    the likely causes, and the JSON's `quality` says `poor`; the right eta gives `ok`."""
+    the likely causes, and the JSON's `quality` says `poor`; the right eta gives `ok`. (At eta
+    1.1 red's total reflectance comes out 1.033: a failed fit, exit 2, since issue 38.)"""
     d = measurements
     common = [d / "skin1.exr", "--reference", d / "skin1_ref.exr", "--dark", d / "skin1_dark.exr", "--json"]
-    wrong = run(*common, "--eta", 1.1)
+    wrong = run(*common, "--eta", 1.15)
     assert wrong.returncode == 0, wrong.stderr
     table = json.loads(wrong.stdout)
     assert all(q.startswith("poor") for q in table["quality"]) and min(table["chi2_reduced"]) > 4
