@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import struct
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -54,47 +53,6 @@ def _plain_attributes(header: dict) -> dict:
     return plain
 
 
-MAGIC = b"\x76\x2f\x31\x01"
-MAX_HEADER = 1 << 20  # bytes of attributes before the header must have ended
-
-
-def _header_size(path: Path) -> tuple[int, int, int]:
-    """(width, height, channels) from the file's own header, read with ``struct`` before
-    OpenEXR allocates anything: a 598-byte file that declares 100000^2 pixels had asked for
-    37 GiB. Raises ExrError for a file that is not an EXR or ends inside its header."""
-    with path.open("rb") as handle:
-        data = handle.read(MAX_HEADER)
-    if data[:4] != MAGIC:
-        raise ExrError(f"{path}: not an OpenEXR file (it does not start with the EXR magic number)")
-    position, window, count = 8, None, None
-    try:
-        while True:
-            end = data.index(b"\0", position)
-            name = data[position:end]
-            if not name:  # the empty name ends the header
-                break
-            type_end = data.index(b"\0", end + 1)
-            kind = data[end + 1:type_end]
-            (size,) = struct.unpack_from("<i", data, type_end + 1)
-            value = data[type_end + 5:type_end + 5 + size]
-            if len(value) < size or size < 0:
-                raise ValueError
-            if name == b"dataWindow" and kind == b"box2i":
-                window = struct.unpack("<4i", value[:16])
-            elif name == b"channels" and kind == b"chlist":  # (name, 16 bytes of type and sampling)..., 0
-                count, at = 0, 0
-                while value[at:at + 1] not in (b"", b"\0"):
-                    at = value.index(b"\0", at) + 17
-                    count += 1
-            position = type_end + 5 + size
-    except (ValueError, struct.error):
-        raise ExrError(f"{path}: truncated or not an OpenEXR file (its header ends early)") from None
-    if window is None:
-        raise ExrError(f"{path}: truncated or not an OpenEXR file (no dataWindow in its header)")
-    x0, y0, x1, y1 = window
-    return x1 - x0 + 1, y1 - y0 + 1, count or 1
-
-
 @contextlib.contextmanager
 def _stdout_to_stderr():
     """OpenEXR's C++ library prints some warnings to stdout, which would corrupt a command's
@@ -134,11 +92,15 @@ def read_exr(path, channels: Sequence[str] | None = None, *, allow_nonfinite: bo
     import OpenEXR
 
     from jsss.render.budget import check_size
+    from jsss.render.surface_maps import exr_header_size
 
     path = Path(path)
     if not path.is_file():
         raise ExrError(f"{path}: no such file")
-    width, height, count = _header_size(path)
+    try:
+        width, height, count = exr_header_size(path)
+    except ValueError as error:
+        raise ExrError(str(error)) from None
     if width < 1 or height < 1:
         raise ExrError(f"{path}: its header declares {width} x {height} pixels")
     # float32 channels as read, then float64 as returned: 12 bytes a channel

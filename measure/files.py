@@ -117,6 +117,10 @@ def read_measurement(measurement, reference, *, dark=None, saturation: float | N
         if image.pixels.shape != meas.pixels.shape:
             raise MeasurementError(f"{image.path}: shape {image.pixels.shape} differs from {meas.path} "
                                    f"{meas.pixels.shape}")
+    height, width = meas.pixels.shape[:2]
+    if min(height, width) < MIN_SIDE:
+        raise MeasurementError(f"{meas.path}: {width} x {height} pixels is too small for a radial profile (at least "
+                               f"{MIN_SIDE} x {MIN_SIDE}: the beam and the light's fall-off around it)")
     if not merged:
         _check_clipping(meas)
     _check_clipping(ref)
@@ -124,11 +128,31 @@ def read_measurement(measurement, reference, *, dark=None, saturation: float | N
     # where its file records one (raw and TIFF metadata, the EXR attribute jsss_exposure), so
     # that a measurement and a reference exposed differently calibrate correctly.
     offset = 0.0 if dark_image is None else dark_image.pixels
-    meas_pixels = meas.pixels if merged else (meas.pixels - offset) / meas.header.get("jsss_exposure", 1.0)
-    ref_pixels = (ref.pixels - offset) / ref.header.get("jsss_exposure", 1.0)
-    pixel_mm = meas.header.get("jsss_pixel_mm")
+    meas_pixels = meas.pixels if merged else (meas.pixels - offset) / _header_number(meas, "jsss_exposure", 1.0)
+    ref_pixels = (ref.pixels - offset) / _header_number(ref, "jsss_exposure", 1.0)
+    pixel_mm = _header_number(meas, "jsss_pixel_mm", None)
     return MeasurementImages(meas_pixels, ref_pixels, tuple(meas.channels),
                              None if pixel_mm is None else float(pixel_mm), Path(meas.path), Path(ref.path))
+
+
+MIN_SIDE = 16  # pixels: below this no radial profile has bins beyond the beam (a 1 x 1 image had met an internal check)
+
+
+def _header_number(image: ExrImage, key: str, default):
+    """A positive, finite number from the file's header (``default`` where it has none): a bad
+    one is named as the file's, not as the flag that would override it (a header pixel size of
+    -1 had been blamed on --pixel-mm, an exposure of 0 on "non-finite pixel values")."""
+    if key not in image.header:
+        return default
+    value = image.header[key]
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = float("nan")
+    if not (np.isfinite(number) and number > 0):
+        raise MeasurementError(f"{image.path}: the header attribute {key} is {value!r}; it must be a number > 0 "
+                               "(fix the file, or remove the attribute and pass the value on the command line)")
+    return number
 
 
 def _merge_brackets(paths: Sequence, saturation, dark, white_balance, names) -> tuple:
@@ -150,7 +174,7 @@ def _merge_brackets(paths: Sequence, saturation, dark, white_balance, names) -> 
                                    "of a frame)")
         saturation = levels.pop()  # raw and integer files know their clip level
     dark_image = None if dark is None else read_image(dark, frames[0].channels, white_balance=white_balance)
-    merged = merge_brackets([f.pixels for f in frames], [f.header["jsss_exposure"] for f in frames],
+    merged = merge_brackets([f.pixels for f in frames], [_header_number(f, "jsss_exposure", None) for f in frames],
                             saturation=saturation, dark=None if dark_image is None else dark_image.pixels,
                             names=[str(f.path) for f in frames])
     return (ExrImage(merged, frames[0].channels, {**frames[0].header, "jsss_merged": True}, frames[0].path),

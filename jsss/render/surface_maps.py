@@ -30,6 +30,7 @@ The arrays here are stored in texel order (row index increasing with ``v``, as
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,7 +43,7 @@ from ..medium import Medium
 from ..numerics import safe_sqrt
 
 __all__ = ["MAP_KEYS", "TEXTURING", "MapError", "MapParams", "MapSampler", "SurfaceMaps", "blend_coefficients",
-           "coordinates", "crossing_light", "read_map", "read_points", "scaled", "srgb_to_linear"]
+           "coordinates", "crossing_light", "exr_header_size", "read_map", "read_points", "scaled", "srgb_to_linear"]
 
 TEXTURING = ("pre-post", "pre", "post")
 COLOUR_KEYS = ("albedo",)
@@ -65,9 +66,64 @@ def srgb_to_linear(encoded):
     return np.where(encoded <= 0.04045, encoded / 12.92, ((encoded + 0.055) / 1.055) ** 2.4)
 
 
+MAGIC = b"\x76\x2f\x31\x01"
+MAX_HEADER = 1 << 20  # bytes of attributes before the header must have ended
+
+
+def exr_header_size(path) -> tuple[int, int, int]:
+    """(width, height, channels) from the file's own header, read with ``struct`` before
+    OpenEXR allocates anything: a 598-byte file that declares 100000^2 pixels had asked for
+    37 GiB. Raises ValueError, naming the file, for one that is not an EXR or ends inside its
+    header."""
+    path = Path(path)
+    with path.open("rb") as handle:
+        data = handle.read(MAX_HEADER)
+    if data[:4] != MAGIC:
+        raise ValueError(f"{path}: not an OpenEXR file (it does not start with the EXR magic number)")
+    position, window, count = 8, None, None
+    try:
+        while True:
+            end = data.index(b"\0", position)
+            name = data[position:end]
+            if not name:  # the empty name ends the header
+                break
+            type_end = data.index(b"\0", end + 1)
+            kind = data[end + 1:type_end]
+            (size,) = struct.unpack_from("<i", data, type_end + 1)
+            value = data[type_end + 5:type_end + 5 + size]
+            if len(value) < size or size < 0:
+                raise ValueError
+            if name == b"dataWindow" and kind == b"box2i":
+                window = struct.unpack("<4i", value[:16])
+            elif name == b"channels" and kind == b"chlist":  # (name, 16 bytes of type and sampling)..., 0
+                count, at = 0, 0
+                while value[at:at + 1] not in (b"", b"\0"):
+                    at = value.index(b"\0", at) + 17
+                    count += 1
+            position = type_end + 5 + size
+    except (ValueError, struct.error):
+        raise ValueError(f"{path}: truncated or not an OpenEXR file (its header ends early)") from None
+    if window is None:
+        raise ValueError(f"{path}: truncated or not an OpenEXR file (no dataWindow in its header)")
+    x0, y0, x1, y1 = window
+    return x1 - x0 + 1, y1 - y0 + 1, count or 1
+
+
 def _read_exr(path: Path) -> np.ndarray:
     import OpenEXR
 
+    from .budget import check_size
+
+    try:
+        width, height, count = exr_header_size(path)
+    except ValueError as error:
+        raise MapError(str(error).removeprefix(f"{path}: ")) from None
+    if max(width, height) > MAX_MAP_SIDE or min(width, height) < 1:
+        raise MapError(f"its header declares {width} x {height} pixels; a map needs 2 to {MAX_MAP_SIDE} per side")
+    problem = check_size(width * height * count, 12, f"its header's {width} x {height} pixels x {count} channel(s)",
+                         largest="{:,} pixel values")
+    if problem:
+        raise MapError(problem)
     try:
         with OpenEXR.File(str(path), separate_channels=True) as exr:
             channels = {name: np.asarray(ch.pixels, float) for name, ch in exr.channels().items()}

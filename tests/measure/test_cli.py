@@ -174,6 +174,9 @@ def test_manifest_lists_measurements_and_one_measurement_twice_is_two_rows(measu
         ("eta_10", "is not finite"),  # had been sigma 500, R_d 979.8 and NaN in the --json output
         ("scaled", "which no material returns"),  # a measurement x1000 had been R_d 1.017
         ("saturation", "--saturation must be > 0"),  # had been ignored
+        ("one_pixel", "1 x 1 pixels is too small for a radial profile"),  # had been an internal radial_profile line
+        ("header_pixel", "the header attribute jsss_pixel_mm is -1.0"),  # had been blamed on --pixel-mm
+        ("header_exposure", "the header attribute jsss_exposure is 0.0"),  # had been "non-finite pixel values"
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path):
@@ -228,6 +231,14 @@ def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path
                 "--dark", d / "skin1_dark.exr"]
     elif case == "saturation":
         args = [d / "skin1.exr", "--reference", ref, "--saturation", -1]
+    elif case == "one_pixel":
+        args = [write_exr(tmp_path / "one.exr", np.full((1, 1, 3), 0.5)), "--reference",
+                write_exr(tmp_path / "one_ref.exr", np.ones((1, 1, 3))), "--pixel-mm", 0.05]
+    elif case in ("header_pixel", "header_exposure"):
+        image = read_exr(d / "skin1.exr")
+        key = "jsss_pixel_mm" if case == "header_pixel" else "jsss_exposure"
+        args = [write_exr(tmp_path / "header.exr", image.pixels, attributes={**image.header, key: -1.0 if
+                          case == "header_pixel" else 0.0}), "--reference", ref]
     else:
         args = [write_exr(tmp_path / "small.exr", np.ones((8, 8, 3))), "--reference", ref, "--pixel-mm", 0.05]
     out = run(*args)

@@ -71,6 +71,20 @@ CASES = {  # name: (edit, extra flags, words the one line must hold)
     "sigma_s_prime 0": (_material(sigma_s_prime=0.0), [], ["[material] sigma_s_prime", "scatters"]),
     "roughness 1e300": (_set("material", "roughness", 1e300), [], ["[material] roughness", "Beckmann"]),
     "all vertices at one point": (None, [], ["[geometry] shape", "one point"]),
+    # and the rest of the scene, which already answered in one line: kept answering so
+    "resolution zero": (_set("camera", "resolution", [0, 240]), [], ["[camera] resolution", "> 0"]),
+    "fov 180": (_set("camera", "fov", 180.0), [], ["[camera] fov", "180"]),
+    "eta as a string": (_material(eta="1.3"), [], ["[material] eta", "list of 3 numbers"]),
+    "no lights": (lambda d: d.__setitem__("lights", []), [], ["lights", "non-empty"]),
+    "misspelt section": (lambda d: d.__setitem__("materail", {}), [], ["materail", "material"]),
+    "texture 8": (_set("render", "texture_size", 8), [], ["[render] texture_size", "[16, 8192]"]),
+    "accuracy 2": (_set("render", "accuracy", 2.0), [], ["[render] accuracy", "(0, 1)"]),
+    "--accuracy 0": (lambda d: None, ["--accuracy", "0"], ["--accuracy", "(0, 1)"]),
+    "direction zero": (_set("lights", "direction", [0.0, 0.0, 0.0]), [], ["[lights[0]] direction", "zero"]),
+    "missing map": (lambda d: d["material"].__setitem__("maps", {"albedo": "nope.png"}), [],
+                    ["[material.maps] albedo", "nope.png"]),
+    "exposure -1": (_set("render", "exposure", -1.0), [], ["[render] exposure", "> 0"]),
+    "negative sigma_a": (_material(sigma_a=[-0.1, 0.01, 0.01]), [], ["[material] sigma_a", ">= 0"]),
 }
 
 

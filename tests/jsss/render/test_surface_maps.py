@@ -398,3 +398,19 @@ def test_a_colour_map_keeps_the_texture_space_frame_linear_in_the_weights(tmp_pa
     mapped = _scene(tmp_path, {"sigma_a": _write(tmp_path, "sa.exr", sigma_a)}, scene=dict(FIN))
     with pytest.raises(ValueError, match="parameter maps"):
         linear_frame(mapped, plan_scene(mapped, method=Method.TEXTURE_SPACE))
+
+
+def test_a_map_whose_header_declares_a_huge_image_is_refused_before_reading(tmp_path):
+    """The file's own header is read first (a 600-byte EXR may declare 100000^2 pixels)."""
+    import struct
+
+    write_exr(tmp_path / "real.exr", np.ones((4, 4, 3)))
+    data = (tmp_path / "real.exr").read_bytes()
+    at = data.index(b"box2i", data.index(b"dataWindow")) + len(b"box2i\0") + 4
+    (tmp_path / "huge.exr").write_bytes(data[:at] + struct.pack("<4i", 0, 0, 99_999, 99_999) + data[at + 16:])
+    (tmp_path / "cut.exr").write_bytes(data[:100])
+    for name, message in (("huge.exr", "declares 100000 x 100000 pixels"), ("cut.exr", "truncated or not an OpenEXR")):
+        with pytest.raises(SceneError) as error:
+            _scene(tmp_path, {"albedo": name})
+        line = str(error.value)
+        assert "\n" not in line and name in line and "[material.maps] albedo" in line and message in line
