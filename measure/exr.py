@@ -91,23 +91,15 @@ def read_exr(path, channels: Sequence[str] | None = None, *, allow_nonfinite: bo
     """
     import OpenEXR
 
-    from jsss.render.budget import check_size
-    from jsss.render.surface_maps import exr_header_size
+    from jsss.render.surface_maps import checked_exr_size
 
     path = Path(path)
     if not path.is_file():
         raise ExrError(f"{path}: no such file")
     try:
-        width, height, count = exr_header_size(path)
+        checked_exr_size(path)  # before OpenEXR allocates what the header declares
     except ValueError as error:
         raise ExrError(str(error)) from None
-    if width < 1 or height < 1:
-        raise ExrError(f"{path}: its header declares {width} x {height} pixels")
-    # float32 channels as read, then float64 as returned: 12 bytes a channel
-    problem = check_size(width * height * count, 12, f"its header's {width} x {height} pixels x {count} channel(s)",
-                         largest="{:,} pixel values")
-    if problem:
-        raise ExrError(f"{path}: {problem}")
     try:
         with _stdout_to_stderr(), OpenEXR.File(str(path), separate_channels=True) as exr:
             header = dict(exr.header())

@@ -131,8 +131,8 @@ def read_measurement(measurement, reference, *, dark=None, saturation: float | N
     meas_pixels = meas.pixels if merged else (meas.pixels - offset) / _header_number(meas, "jsss_exposure", 1.0)
     ref_pixels = (ref.pixels - offset) / _header_number(ref, "jsss_exposure", 1.0)
     pixel_mm = _header_number(meas, "jsss_pixel_mm", None)
-    return MeasurementImages(meas_pixels, ref_pixels, tuple(meas.channels),
-                             None if pixel_mm is None else float(pixel_mm), Path(meas.path), Path(ref.path))
+    return MeasurementImages(meas_pixels, ref_pixels, tuple(meas.channels), pixel_mm, Path(meas.path),
+                             Path(ref.path))
 
 
 MIN_SIDE = 16  # pixels: below this no radial profile has bins beyond the beam (a 1 x 1 image had met an internal check)

@@ -43,7 +43,7 @@ from ..medium import Medium
 from ..numerics import safe_sqrt
 
 __all__ = ["MAP_KEYS", "TEXTURING", "MapError", "MapParams", "MapSampler", "SurfaceMaps", "blend_coefficients",
-           "coordinates", "crossing_light", "exr_header_size", "read_map", "read_points", "scaled", "srgb_to_linear"]
+           "checked_exr_size", "coordinates", "crossing_light", "exr_header_size", "read_map", "read_points", "scaled", "srgb_to_linear"]
 
 TEXTURING = ("pre-post", "pre", "post")
 COLOUR_KEYS = ("albedo",)
@@ -109,21 +109,32 @@ def exr_header_size(path) -> tuple[int, int, int]:
     return x1 - x0 + 1, y1 - y0 + 1, count or 1
 
 
-def _read_exr(path: Path) -> np.ndarray:
-    import OpenEXR
-
+def checked_exr_size(path, *, map_side: int | None = None) -> tuple[int, int, int]:
+    """:func:`exr_header_size`, refused (ValueError naming the file) where the header declares
+    no pixels, more than ``map_side`` per side (a surface map's limit), or more than half the
+    available memory holds once read (float32 channels, then float64: 12 bytes a value;
+    :mod:`jsss.render.budget`). Measurements and maps both read their EXRs behind it."""
     from .budget import check_size
 
-    try:
-        width, height, count = exr_header_size(path)
-    except ValueError as error:
-        raise MapError(str(error).removeprefix(f"{path}: ")) from None
-    if max(width, height) > MAX_MAP_SIDE or min(width, height) < 1:
-        raise MapError(f"its header declares {width} x {height} pixels; a map needs 2 to {MAX_MAP_SIDE} per side")
+    width, height, count = exr_header_size(path)
+    if map_side is not None and (max(width, height) > map_side or min(width, height) < 1):
+        raise ValueError(f"{path}: its header declares {width} x {height} pixels; a map needs 2 to {map_side} per side")
+    if width < 1 or height < 1:
+        raise ValueError(f"{path}: its header declares {width} x {height} pixels")
     problem = check_size(width * height * count, 12, f"its header's {width} x {height} pixels x {count} channel(s)",
                          largest="{:,} pixel values")
     if problem:
-        raise MapError(problem)
+        raise ValueError(f"{path}: {problem}")
+    return width, height, count
+
+
+def _read_exr(path: Path) -> np.ndarray:
+    import OpenEXR
+
+    try:
+        checked_exr_size(path, map_side=MAX_MAP_SIDE)  # before OpenEXR allocates what the header declares
+    except ValueError as error:
+        raise MapError(str(error).removeprefix(f"{path}: ")) from None
     try:
         with OpenEXR.File(str(path), separate_channels=True) as exr:
             channels = {name: np.asarray(ch.pixels, float) for name, ch in exr.channels().items()}

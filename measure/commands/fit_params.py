@@ -176,7 +176,7 @@ def _fit(args) -> int:
     start()
     say(f"fitting {args.model} (the first fit compiles: 10-20 s)")
     result = fit_model(args.model)
-    _refuse_failed(result, Path(args.measurement[0]))
+    _refuse_failed(result, f"{args.measurement[0]}: ")
     comparison = _dipole_bias(result, lambda: fit_model("transport")) if args.model == "dipole" else None
     _report(result, args, extra=comparison, stem=Path(args.measurement[0]).stem)
     return 0
@@ -186,11 +186,12 @@ LIKELY_CAUSES = ("check --pixel-mm (or the EXR's pixel size), --eta, --reference
                  "measurement and the reference share their exposure")
 
 
-def _refuse_failed(result, measurement: Path) -> None:
-    """A fit that is not a result ends the command in one line (exit 2) naming its reasons."""
+def _refuse_failed(result, where: str = "") -> None:
+    """A fit that is not a result ends the command in one line (exit 2; a batch's row: failed)
+    naming its reasons (:attr:`measure.pipeline.MeasurementFit.failures`)."""
     reasons = result.failures
     if reasons:
-        raise UsageError(f"{measurement}: the fit failed: {'; '.join(reasons)}; {LIKELY_CAUSES}")
+        raise UsageError(f"{where}the fit failed: {'; '.join(reasons)}; {LIKELY_CAUSES}")
 
 
 def _read_and_fit(measurement, reference, **read_options):
@@ -409,8 +410,7 @@ def _fit_row(job, options) -> dict:
         result = fit(overrides.get("eta", options["eta"]), pixel_mm=overrides.get("pixel_mm", options["pixel_mm"]),
                      reference_reflectance=overrides.get("reference_reflectance", options["reference_reflectance"]),
                      model=options["model"], g=options["g"], view_angle_deg=options["view_angle_deg"])
-        if result.failures:
-            raise UsageError(f"the fit failed: {'; '.join(result.failures)}; {LIKELY_CAUSES}")
+        _refuse_failed(result)
         table = result.table()
         for key in _ROW_KEYS:
             for ch, value in zip(table["channels"], table[key]):
@@ -556,7 +556,7 @@ class _Journal:
     def append(self, row: dict) -> None:
         if self.handle is None:
             self.handle = self.path.open("a")
-        self.handle.write(json.dumps(_finite(row), allow_nan=False) + "\n")
+        self.handle.write(json.dumps(_json_safe(row), allow_nan=False) + "\n")
         self.handle.flush()
         os.fsync(self.handle.fileno())
 
@@ -566,11 +566,6 @@ class _Journal:
             self.handle = None
         if remove:
             self.path.unlink(missing_ok=True)
-
-
-def _finite(row: dict) -> dict:
-    """JSON has no NaN or Infinity: such values are null."""
-    return _json_safe(row)
 
 
 def _json_safe(value):
