@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from jsss.render.surface_maps import checked_png_header, read_png_16_bit_colour
 from measure.exr import ExrError, ExrImage, read_exr
 
 __all__ = ["NonLinearWarning", "PhotoError", "RAW_SUFFIXES", "read_image"]
@@ -159,25 +160,24 @@ def _read_tiff(path) -> ExrImage:
 
 
 def _png_header(path) -> tuple[int, int]:
-    """(bit depth, colour type) from a PNG's IHDR chunk, or (0, -1) where the file has none."""
-    with open(path, "rb") as handle:
-        head = handle.read(26)
-    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        return 0, -1
-    return head[24], head[25]
+    """:func:`~jsss.render.surface_maps.checked_png_header`, its refusal as a PhotoError."""
+    try:
+        return checked_png_header(path)
+    except ValueError as error:
+        raise PhotoError(str(error)) from None
 
 
 def _read_png(path) -> ExrImage:
     import imageio.v3 as iio
 
     depth, colour = _png_header(path)
-    if depth == 16 and colour in (2, 6):  # Pillow decodes 16-bit colour samples to 8 bits
-        raise PhotoError(f"{path}: a 16-bit RGB PNG, whose colour samples Pillow (the PNG reader here) cuts to 8 "
-                         "bits; save the measurement as a 16-bit TIFF, raw or EXR (a 16-bit grey PNG reads exactly)")
     try:
-        data = iio.imread(path, plugin="pillow")
         meta = iio.immeta(path, plugin="pillow")
-    except Exception as error:  # imageio wraps Pillow's errors in several types
+        if depth == 16 and colour in (2, 6):
+            data = read_png_16_bit_colour(path)
+        else:
+            data = iio.imread(path, plugin="pillow")
+    except Exception as error:  # imageio wraps Pillow's errors in several types, pypng raises its own
         raise PhotoError(f"{path}: not a readable PNG file ({_why(error)})") from None
     if "srgb" in meta or "icc_profile" in meta or abs(float(meta.get("gamma", 1.0)) - 1.0) > 1e-3:
         warnings.warn(f"{path}: the file says sRGB or a display gamma, not linear; the fit assumes pixels "

@@ -15,6 +15,7 @@ import pytest
 from jsss.materials import jensen2001
 from measure.photo import NonLinearWarning, PhotoError, read_image
 from measure.synth import synthesize
+from tests.helpers import png16
 
 BLACK, WHITE = 512, 16383
 
@@ -156,25 +157,21 @@ def test_tiff_measurement_and_reference_at_different_exposures_fit_end_to_end(tm
     np.testing.assert_allclose(table["sigma_s_prime"], np.asarray(skin.sigma_s_prime), rtol=0.05)
 
 
-def _png16_rgb(path, pixels):
-    """A valid 16-bit RGB PNG written by hand (Pillow writes none): IHDR, one IDAT, IEND."""
+@pytest.mark.parametrize("planes", [3, 4])
+def test_a_16_bit_colour_png_reads_every_sample_exactly(tmp_path, planes):
+    """Pillow cuts 16-bit colour samples to 8 bits (a valid file had been refused as "8-bit").
+    RGB and RGBA, every filter type: each sample reads back as its code / 65535, alpha dropped."""
+    pixels = (np.random.default_rng(0).random((11, 7, planes)) * 65535).astype(np.uint16)
+    image = read_image(png16(tmp_path / f"rgb16_{planes}.png", pixels))
+    np.testing.assert_array_equal(image.pixels, pixels[..., :3] / 65535.0)
+
+
+def test_a_png_header_larger_than_memory_is_refused_before_decoding(tmp_path):
+    """A 100000^2 16-bit RGB PNG header over a few bytes of data: one line naming the file and the
+    memory, before any decoder allocates (pypng and Pillow would both try)."""
     import struct
-    import zlib
 
-    def chunk(kind, data):
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-
-    height, width, _ = pixels.shape
-    rows = b"".join(b"\0" + pixels[i].astype(">u2").tobytes() for i in range(height))
-    header = struct.pack(">IIBBBBB", width, height, 16, 2, 0, 0, 0)
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(rows))
-                     + chunk(b"IEND", b""))
-    return path
-
-
-def test_a_16_bit_rgb_png_is_named_for_what_it_is(tmp_path):
-    """Pillow cuts 16-bit colour samples to 8 bits: such a file had been refused as "8-bit".
-    It is named as a 16-bit RGB PNG, with what to save instead."""
-    pixels = (np.random.default_rng(0).random((6, 5, 3)) * 65535).astype(np.uint16)
-    with pytest.raises(PhotoError, match="16-bit RGB PNG.*16-bit TIFF, raw or EXR"):
-        read_image(_png16_rgb(tmp_path / "rgb16.png", pixels))
+    header = struct.pack(">IIBBBBB", 100_000, 100_000, 16, 2, 0, 0, 0)
+    path = png16(tmp_path / "huge.png", np.zeros((1, 1, 3), np.uint16), header=header)
+    with pytest.raises(PhotoError, match=r"huge\.png: its header's 100000 x 100000 pixels would take about"):
+        read_image(path)

@@ -20,6 +20,7 @@ from jsss.render.profile_blend import choose_basis
 from jsss.render.surface_maps import MapSampler, blend_coefficients, srgb_to_linear
 from jsss import transport
 from measure.exr import write_exr
+from tests.helpers import png16
 from tests.jsss.render.scenes import flat_plane, scene_dict
 
 SIZE = 32  # map texels per side
@@ -64,6 +65,15 @@ def test_eight_bit_maps_are_decoded_from_srgb_and_flipped_to_texel_order(tmp_pat
     assert np.all(maps.albedo[-1] == 1.0) and np.all(maps.albedo[1:-1] == 0.0)
     np.testing.assert_allclose(maps.albedo[0], 0.21586, atol=1e-5)  # sRGB 128 / 255
     assert srgb_to_linear(0.04045) == pytest.approx(0.04045 / 12.92)
+
+
+def test_a_16_bit_colour_png_map_keeps_its_16_bits(tmp_path):
+    """Pillow cuts 16-bit colour samples to 8 bits; the map reader decodes them whole (sRGB 1/65535
+    steps, every PNG filter type)."""
+    codes = (np.random.default_rng(1).random((5, 4, 3)) * 65535).astype(np.uint16)
+    png16(tmp_path / "c16.png", codes)
+    maps = _scene(tmp_path, {"albedo": "c16.png"}).material.maps
+    np.testing.assert_allclose(maps.albedo, srgb_to_linear(codes[::-1] / 65535.0), rtol=1e-12, atol=1e-15)
 
 
 @pytest.mark.parametrize("maps, keys, message", [
