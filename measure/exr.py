@@ -54,21 +54,32 @@ def _plain_attributes(header: dict) -> dict:
 
 
 @contextlib.contextmanager
-def _stdout_to_stderr():
-    """OpenEXR's C++ library prints some warnings to stdout, which would corrupt a command's
-    ``--json``: send file descriptor 1 to stderr while it reads."""
+def _library_output():
+    """Capture what OpenEXR's C++ library prints (to stdout and stderr) while it reads: on stdout
+    it would corrupt a command's ``--json``, and on stderr it would put a second line before
+    the command's one-line error. Yields a list that holds the text afterwards."""
+    import tempfile
+
+    captured: list[str] = []
     try:
         sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError, AttributeError):  # no real stdout (a notebook, a test capture)
-        yield
+        sys.stderr.flush()
+        saved = os.dup(1), os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no real file descriptors (a notebook, a test capture)
+        yield captured
         return
-    try:
-        os.dup2(2, 1)
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
+    with tempfile.TemporaryFile(mode="w+b") as sink:
+        try:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
+            yield captured
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+            sink.seek(0)
+            captured.append(sink.read().decode("utf-8", "replace"))
 
 
 def read_exr(path, channels: Sequence[str] | None = None, *, allow_nonfinite: bool = False) -> ExrImage:
@@ -101,11 +112,15 @@ def read_exr(path, channels: Sequence[str] | None = None, *, allow_nonfinite: bo
     except ValueError as error:
         raise ExrError(str(error)) from None
     try:
-        with _stdout_to_stderr(), OpenEXR.File(str(path), separate_channels=True) as exr:
+        with _library_output() as printed, OpenEXR.File(str(path), separate_channels=True) as exr:
             header = dict(exr.header())
             available = {name: np.asarray(ch.pixels) for name, ch in exr.channels().items()}
     except Exception as error:  # OpenEXR raises RuntimeError with its own wording
-        raise ExrError(f"{path}: truncated or not a readable OpenEXR file ({error})") from None
+        said = next((line.strip() for line in "".join(printed).splitlines() if line.strip()), "")
+        said = said.removeprefix(f"{path}:").strip()[:160]  # its first line says what is wrong; the rest repeats it
+        raise ExrError(f"{path}: truncated or not a readable OpenEXR file ({said or error})") from None
+    if "".join(printed).strip():  # a warning on a file that did read: keep it, on stderr
+        print("".join(printed).rstrip(), file=sys.stderr)
     if channels is None:
         if all(c in available for c in "RGB"):
             channels = ("R", "G", "B")

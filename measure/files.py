@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from .checks import MeasurementError
-from .exr import ExrImage
+from .exr import ExrError, ExrImage
 
-__all__ = ["MeasurementImages", "fit_images", "read_measurement"]
+__all__ = ["MeasurementImages", "check_options", "fit_images", "read_measurement"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +62,33 @@ def _name(names: Mapping[str, str] | None, parameter: str) -> str:
 def _choice(names: Mapping[str, str] | None, parameter: str, value: str) -> str:
     """``--model transport`` as a command spells it, ``model='transport'`` as Python does."""
     return f"{names[parameter]} {value}" if names and parameter in names else f"{parameter}={value!r}"
+
+
+def check_options(*, eta, pixel_mm=None, reference_reflectance=0.99, view_angle_deg=None, model="transport",
+                  g=0.0, names: Mapping[str, str] | None = None) -> None:
+    """Refuse (ValueError naming the option as ``names`` spells it) a fit's option out of its
+    range; ``eta`` and ``pixel_mm`` None are not checked (a manifest's row or a file's header
+    may give them). A batch calls this before its first fit, so that a bad flag is one line,
+    not one failed row per image."""
+    if eta is not None and not (np.isfinite(eta) and eta > 0):
+        raise ValueError(f"{_name(names, 'eta')} must be > 0 (the relative index of refraction, e.g. 1.3); got {eta}")
+    if pixel_mm is not None and not (np.isfinite(pixel_mm) and pixel_mm > 0):
+        raise ValueError(f"{_name(names, 'pixel_mm')} must be > 0 (the pixel size on the sample in mm); "
+                         f"got {pixel_mm:g}")
+    if not (0 < reference_reflectance <= 1):  # also refuses nan
+        raise ValueError(f"{_name(names, 'reference_reflectance')} must be in (0, 1] (0.99 for Spectralon); "
+                         f"got {reference_reflectance:g}")
+    if view_angle_deg is not None and not (0 <= view_angle_deg < 90):  # also refuses nan
+        raise ValueError(f"{_name(names, 'view_angle_deg')} must lie in [0, 90) degrees (the camera's angle from "
+                         f"the normal); got {view_angle_deg:g}")
+    if model == "transport" and eta is not None:
+        from jsss import transport
+
+        try:
+            transport.check_supported(eta, g)
+        except ValueError as error:
+            raise ValueError(f"{_choice(names, 'model', 'transport')}: {error} ({_choice(names, 'model', 'dipole')} "
+                             "fits any eta, with diffusion's bias)") from None
 
 
 def read_measurement(measurement, reference, *, dark=None, saturation: float | None = None,
@@ -111,8 +138,8 @@ def read_measurement(measurement, reference, *, dark=None, saturation: float | N
         meas, dark_image = _merge_brackets(paths, saturation, dark, white_balance, names)
     else:
         meas = read_image(paths[0], white_balance=white_balance)
-        dark_image = None if dark is None else read_image(dark, meas.channels, white_balance=white_balance)
-    ref = read_image(reference, meas.channels, white_balance=white_balance)
+        dark_image = None if dark is None else _read_like(dark, meas, white_balance)
+    ref = _read_like(reference, meas, white_balance)
     for image in [ref] + ([dark_image] if dark_image else []):
         if image.pixels.shape != meas.pixels.shape:
             raise MeasurementError(f"{image.path}: shape {image.pixels.shape} differs from {meas.path} "
@@ -130,9 +157,29 @@ def read_measurement(measurement, reference, *, dark=None, saturation: float | N
     offset = 0.0 if dark_image is None else dark_image.pixels
     meas_pixels = meas.pixels if merged else (meas.pixels - offset) / _header_number(meas, "jsss_exposure", 1.0)
     ref_pixels = (ref.pixels - offset) / _header_number(ref, "jsss_exposure", 1.0)
+    sums = np.asarray(ref_pixels, float).reshape(-1, ref_pixels.shape[-1]).sum(0)
+    if np.any(sums <= 0):  # (a measurement without light is named by measure.checks, with its noise)
+        channel = list(ref.channels)[int(np.argmax(sums <= 0))]
+        after = " after the dark frame" if dark_image is not None else ""
+        raise MeasurementError(f"{ref.path}: holds no light{after} (its pixels sum to <= 0 in channel {channel}); "
+                               "is it the white reference, exposed?")
     pixel_mm = _header_number(meas, "jsss_pixel_mm", None)
     return MeasurementImages(meas_pixels, ref_pixels, tuple(meas.channels), pixel_mm, Path(meas.path),
                              Path(ref.path))
+
+
+def _read_like(path, meas: ExrImage, white_balance: str) -> ExrImage:
+    """``path`` read with the measurement's channels; a file without them is named with the
+    measurement that set them (the reference had been blamed alone)."""
+    from .photo import read_image
+
+    try:
+        return read_image(path, meas.channels, white_balance=white_balance)
+    except ExrError as error:
+        if "missing channel" not in str(error):
+            raise
+        raise ExrError(f"{error}: the measurement {meas.path} has channels {list(meas.channels)}, and its "
+                       "reference and dark frame need the same") from None
 
 
 MIN_SIDE = 16  # pixels: below this no radial profile has bins beyond the beam (a 1 x 1 image had met an internal check)
@@ -246,25 +293,10 @@ def fit_images(images: MeasurementImages, eta: float, *, pixel_mm: float | None 
         if pixel_mm is None:
             raise ValueError(f"{images.measurement_path}: no pixel size in the header (jsss_pixel_mm); pass "
                              f"{_name(names, 'pixel_mm')}")
-    if eta is None or not np.isfinite(eta) or eta <= 0:
-        raise ValueError(f"{_name(names, 'eta')} must be > 0 (the relative index of refraction, e.g. 1.3); got {eta}")
-    if not (np.isfinite(pixel_mm) and pixel_mm > 0):
-        raise ValueError(f"{_name(names, 'pixel_mm')} must be > 0 (the pixel size on the sample in mm); "
-                         f"got {pixel_mm:g}")
-    if not (0 < reference_reflectance <= 1):  # also refuses nan
-        raise ValueError(f"{_name(names, 'reference_reflectance')} must be in (0, 1] (0.99 for Spectralon); "
-                         f"got {reference_reflectance:g}")
-    if view_angle_deg is not None and not (0 <= view_angle_deg < 90):  # also refuses nan
-        raise ValueError(f"{_name(names, 'view_angle_deg')} must lie in [0, 90) degrees (the camera's angle from "
-                         f"the normal); got {view_angle_deg:g}")
-    if model == "transport":
-        from jsss import transport
-
-        try:
-            transport.check_supported(eta, g)
-        except ValueError as error:
-            raise ValueError(f"{_choice(names, 'model', 'transport')}: {error} ({_choice(names, 'model', 'dipole')} "
-                             "fits any eta, with diffusion's bias)") from None
+    if eta is None:
+        raise ValueError(f"{_name(names, 'eta')} must be > 0 (the relative index of refraction, e.g. 1.3); got None")
+    check_options(eta=eta, pixel_mm=pixel_mm, reference_reflectance=reference_reflectance,
+                  view_angle_deg=view_angle_deg, model=model, g=g, names=names)
     try:
         return fit_measurement(images.measurement, images.reference, float(pixel_mm), float(eta),
                                reference_reflectance=reference_reflectance, model=model, g=g,

@@ -158,6 +158,28 @@ class Progress:
 
 
 # ----------------------------------------------------------------------------- errors and exit status
+class Parser(argparse.ArgumentParser):
+    """argparse with a one-line error: ``PROG: error: MESSAGE (see PROG --help)`` and status 2,
+    instead of the usage block before it (a bad flag is one line, like any other bad input)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def json_safe(value):
+    """``value`` with every non-finite float (nested in dicts and lists) as None: JSON has no
+    NaN or Infinity, and a reader would refuse the whole output."""
+    import math
+
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return value
+
+
 def error_line(prog: str, error: BaseException) -> str:
     """``PROG: error: `` and the first line of the error's message (its type where it has none)."""
     message = str(error).splitlines()[0] if str(error) else type(error).__name__

@@ -27,8 +27,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from ._console import Progress, UsageError, add_commands, exit_status, fit_grid, start, version, write_atomically, \
-    write_text
+from ._console import Parser, Progress, UsageError, add_commands, exit_status, fit_grid, json_safe, start, version, \
+    write_atomically, write_text
 
 __all__ = ["main", "parser"]
 
@@ -103,9 +103,9 @@ _MEASUREMENT_HELP = ("measurement image: EXR (linear HDR), a camera raw file (.d
 def parser() -> argparse.ArgumentParser:
     """The ``fit-params`` parser: a single fit (the default command) and the ``batch`` subcommand."""
     options = _single_options()
-    single = argparse.ArgumentParser(prog=PROG, description=_DESCRIPTION, parents=[options])
+    single = Parser(prog=PROG, description=_DESCRIPTION, parents=[options])
     single.add_argument("measurement", nargs="+", help=_MEASUREMENT_HELP)
-    top = argparse.ArgumentParser(prog=PROG, description=_DESCRIPTION, parents=[options])
+    top = Parser(prog=PROG, description=_DESCRIPTION, parents=[options])
     top.set_defaults(run=_fit, measurement=[])
     commands = add_commands(top, default=single, dest="command", metavar="MEASUREMENT ... | batch",
                             help=f"{_MEASUREMENT_HELP}; or the subcommand:")
@@ -155,6 +155,9 @@ def _fit(args) -> int:
                          f"got {args.unit_mm:g}")
     if args.export_to and not args.export:
         raise UsageError("--export-to PREFIX goes with --export FORMAT")
+    for flag, value, example in (("--plot", args.plot, "fit.png"), ("--scene", args.scene, "fitted.toml")):
+        if value and Path(value).is_dir():  # checked before the fit, not after it
+            raise UsageError(f"{flag} {value}: is a folder; give a file name, e.g. {Path(value) / example}")
     say = Progress(PROG, enabled=False if args.quiet else None)
     if args.demo:
         return _demo(args, say)
@@ -337,7 +340,7 @@ def _report(result, args, truth=None, extra=None, stem="fitted"):
     if args.json:
         if truth is not None:
             table = {**table, "truth": truth}
-        print(json.dumps(_json_safe(table), indent=2, allow_nan=False))
+        print(json.dumps(json_safe(table), indent=2, allow_nan=False))
         return
     print(_format_table(table))
     if truth is not None:
@@ -363,16 +366,29 @@ def _find_jobs(target, manifest):
         if not manifest.is_file():
             raise UsageError(f"{manifest}: no such manifest")
         jobs = []
-        with manifest.open(newline="") as handle:
-            reader = csv.DictReader(handle)
-            if not reader.fieldnames or not {"measurement", "reference"} <= set(reader.fieldnames):
-                raise UsageError(f"{manifest}: needs columns "
-                                 "measurement,reference[,dark,pixel_mm,eta,reference_reflectance]")
-            for row in reader:
-                base = manifest.parent
-                overrides = {k: float(row[k]) for k in ("pixel_mm", "eta", "reference_reflectance") if row.get(k)}
-                jobs.append((base / row["measurement"], base / row["reference"],
-                             (base / row["dark"]) if row.get("dark") else None, overrides))
+        try:
+            with manifest.open(newline="", encoding="utf-8") as handle:
+                reader = csv.DictReader(handle)
+                if not reader.fieldnames or not {"measurement", "reference"} <= set(reader.fieldnames):
+                    raise UsageError(f"{manifest}: needs columns "
+                                     "measurement,reference[,dark,pixel_mm,eta,reference_reflectance]")
+                for line, row in enumerate(reader, start=2):
+                    base = manifest.parent
+                    if not row.get("measurement") or not row.get("reference"):
+                        raise UsageError(f"{manifest}: line {line}: needs a measurement and a reference")
+                    overrides = {}
+                    for key in ("pixel_mm", "eta", "reference_reflectance"):
+                        if row.get(key):
+                            try:
+                                overrides[key] = float(row[key])
+                            except ValueError:
+                                raise UsageError(f"{manifest}: line {line}: {key} {row[key]!r} is not a number") from None
+                    jobs.append((base / row["measurement"], base / row["reference"],
+                                 (base / row["dark"]) if row.get("dark") else None, overrides))
+        except UnicodeDecodeError as error:
+            raise UsageError(f"{manifest}: not a CSV manifest: byte {error.start} is not UTF-8") from None
+        except csv.Error as error:
+            raise UsageError(f"{manifest}: not a readable CSV manifest ({error})") from None
         return jobs
     path = Path(target)
     if not path.is_dir() and not glob.has_magic(str(target)):
@@ -556,7 +572,7 @@ class _Journal:
     def append(self, row: dict) -> None:
         if self.handle is None:
             self.handle = self.path.open("a")
-        self.handle.write(json.dumps(_json_safe(row), allow_nan=False) + "\n")
+        self.handle.write(json.dumps(json_safe(row), allow_nan=False) + "\n")
         self.handle.flush()
         os.fsync(self.handle.fileno())
 
@@ -566,18 +582,6 @@ class _Journal:
             self.handle = None
         if remove:
             self.path.unlink(missing_ok=True)
-
-
-def _json_safe(value):
-    """``value`` with every non-finite float (nested in dicts and lists) as None: JSON has no
-    NaN or Infinity, and a reader would refuse the whole output."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    return value
 
 
 @contextlib.contextmanager
@@ -680,8 +684,12 @@ def _batch(args) -> int:
     if args.workers < 1:
         raise UsageError(f"--workers must be at least 1; got {args.workers}")
     out = _check_out(args.out)
-    jobs = _find_jobs(args.target, args.manifest)
     options = _options(args)
+    from measure.files import check_options
+
+    check_options(**{key: options[key] for key in ("eta", "pixel_mm", "reference_reflectance", "view_angle_deg",
+                                                    "model", "g")}, names=OPTION_NAMES)  # before any fit
+    jobs = _find_jobs(args.target, args.manifest)
     settings = [_settings(job, options) for job in jobs]
     with _locked(out):
         rows = _run_batch(jobs, settings, out, args)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._console import exit_status, float64, version
+from ._console import Parser, exit_status, float64, version
 
 __all__ = ["info_lines", "main", "parser"]
 
@@ -77,7 +77,7 @@ def _info(args) -> int:
 
 def parser() -> argparse.ArgumentParser:
     """The ``jsss`` parser: ``table`` (the default) and ``info``."""
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog=PROG,
         description="Print the measured materials of Jensen et al. 2001 (Fig. 5b) with the dipole's total diffuse "
                     "reflectance computed beside the published one; 'jsss info' prints the versions, cache "

@@ -27,11 +27,13 @@ import traceback
 from pathlib import Path
 
 from ._console import (
+    Parser,
     Progress,
     UsageError,
     add_commands,
     error_line,
     exit_status,
+    json_safe,
     start,
     version,
     write_atomically,
@@ -106,9 +108,9 @@ def parser() -> argparse.ArgumentParser:
     methods = _methods()
     options = _render_options(methods)
     formatting = dict(epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter, description=_DESCRIPTION)
-    scenes = argparse.ArgumentParser(prog=PROG, parents=[options], **formatting)
+    scenes = Parser(prog=PROG, parents=[options], **formatting)
     scenes.add_argument("scenes", nargs="+", metavar="scene", help="TOML scene file(s) (see examples/)")
-    top = argparse.ArgumentParser(prog=PROG, parents=[options], **formatting)
+    top = Parser(prog=PROG, parents=[options], **formatting)
     top.set_defaults(run=_render, prog=PROG)
     commands = add_commands(top, default=scenes, dest="command", required=True, metavar="scene ... | fit",
                             help="TOML scene file(s) (see examples/); or the subcommand:")
@@ -327,11 +329,15 @@ def _fit(args) -> int:
     if args.saturation is not None and not (math.isfinite(args.saturation) and args.saturation > 0):
         raise UsageError(f"--saturation must be > 0 (the pixel value at which the camera clipped); "
                          f"got {args.saturation:g}")
+    if Path(args.output).exists() and not Path(args.output).is_dir():
+        raise UsageError(f"-o {args.output}: is a file; give a folder for the .fit.json, .fit.toml and .fit.png")
     say(f"{args.scene}: loading the scene and the photo")
     scene = load_scene(args.scene, allow_outside=args.allow_outside_paths)
     photo = read_image(args.photo).pixels
     if photo.ndim == 3 and photo.shape[2] >= 3:
         photo = photo[..., :3]
+    if not (photo > 0).any():
+        raise UsageError(f"{args.photo}: holds no light (no pixel above 0); a fit needs a photo of the lit object")
     mask = _read_mask(args.mask, photo.shape[:2]) if args.mask else None
     method = None if args.method == "auto" else Method(args.method)
     t0 = time.perf_counter()
@@ -349,7 +355,8 @@ def _fit(args) -> int:
                              specular=material.specular,
                              comment=f"fitted by jsss-render fit ({summary['profile_model']} profile, "
                                      f"{summary['method']}); errors in the .fit.json")
-    files = {out / f"{stem}.fit.json": json.dumps(summary, indent=2) + "\n",
+    summary = json_safe(summary)  # an unconstrained parameter's infinite error is null in JSON
+    files = {out / f"{stem}.fit.json": json.dumps(summary, indent=2, allow_nan=False) + "\n",
              out / f"{stem}.fit.toml": scene_with_material(Path(args.scene).read_text(), fitted)}
     for path, text in files.items():
         write_text(path, text)
@@ -357,7 +364,7 @@ def _fit(args) -> int:
     for warning in result.warnings:
         print(f"{args.prog}: warning: {warning}", file=sys.stderr)
     if args.json:
-        print(json.dumps(summary))
+        print(json.dumps(summary, allow_nan=False))
     else:
         print(f"fitted {args.photo} ({result.method}, {result.profile_model} profile, {result.n_pixels} pixels, "
               f"{result.steps} steps, {seconds:.1f} s, chi2/dof {result.chi2_reduced:.2f})")

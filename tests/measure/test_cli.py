@@ -177,6 +177,10 @@ def test_manifest_lists_measurements_and_one_measurement_twice_is_two_rows(measu
         ("one_pixel", "1 x 1 pixels is too small for a radial profile"),  # had been an internal radial_profile line
         ("header_pixel", "the header attribute jsss_pixel_mm is -1.0"),  # had been blamed on --pixel-mm
         ("header_exposure", "the header attribute jsss_exposure is 0.0"),  # had been "non-finite pixel values"
+        ("black_reference", "black_ref.exr: holds no light"),  # had been "`reference` holds no light", no file
+        ("xz_channels", "the measurement"),  # an X/Z measurement had been blamed on the reference alone
+        ("plot_folder", "--plot"),  # had been a raw OSError naming a temporary file, after the fit
+        ("truncated", "truncated or not a readable OpenEXR file"),  # OpenEXR's own line had come first
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path):
@@ -239,6 +243,17 @@ def test_bad_input_is_one_line_and_exit_2(case, expected, measurements, tmp_path
         key = "jsss_pixel_mm" if case == "header_pixel" else "jsss_exposure"
         args = [write_exr(tmp_path / "header.exr", image.pixels, attributes={**image.header, key: -1.0 if
                           case == "header_pixel" else 0.0}), "--reference", ref]
+    elif case == "black_reference":
+        args = [d / "skin1.exr", "--reference", write_exr(tmp_path / "black_ref.exr", np.zeros((128, 128, 3)))]
+    elif case == "xz_channels":
+        image = read_exr(d / "skin1.exr")
+        args = [write_exr(tmp_path / "xz.exr", image.pixels[..., :2], channels=("X", "Z"), attributes=image.header),
+                "--reference", ref]
+    elif case == "plot_folder":
+        args = [d / "skin1.exr", "--reference", ref, "--plot", tmp_path]
+    elif case == "truncated":
+        (tmp_path / "cut.exr").write_bytes((d / "skin1.exr").read_bytes()[:20000])
+        args = [tmp_path / "cut.exr", "--reference", ref]
     else:
         args = [write_exr(tmp_path / "small.exr", np.ones((8, 8, 3))), "--reference", ref, "--pixel-mm", 0.05]
     out = run(*args)

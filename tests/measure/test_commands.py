@@ -68,12 +68,16 @@ def test_jsss_render_and_jsss_command_lines_parse_to_their_command():
     (fit_params.parser, ["batch", "dir"]),  # --out is required
     (render.parser, []),  # a scene or `fit`
     (render.parser, ["fit", "scene.toml"]),  # and the photo
+    (render.parser, ["scene.toml", "--method", "raytrace"]),
+    (fit_params.parser, ["sample.exr", "--export", "maya"]),
     (info.parser, ["tabel"]),
 ])
 def test_a_malformed_command_line_is_a_usage_error_with_status_2(make, argv, capsys):
+    """One line naming the flag and pointing at --help (argparse printed its usage block first)."""
     with pytest.raises(SystemExit) as exit_:
         make().parse_args(argv)
-    assert exit_.value.code == 2 and "error:" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and err.count("\n") == 1 and "error:" in err and "--help)" in err, err
 
 
 def _parsers(parser, name):
@@ -401,6 +405,33 @@ def test_a_bad_out_is_refused_before_any_fit(monkeypatch, tmp_path, capsys, wher
     assert fit_params.main(["batch", str(tmp_path), "--out", str(tmp_path / where), "-q"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err and fitted == []
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--eta", "nan"], "--eta must be > 0"), (["--pixel-mm", "-1"], "--pixel-mm must be > 0"),
+    (["--reference-reflectance", "2"], "--reference-reflectance must be in (0, 1]"),
+])
+def test_a_bad_batch_flag_is_one_line_before_any_fit(monkeypatch, tmp_path, capsys, flags, message):
+    """A flag out of range is the whole batch's error (exit 2, nothing fitted), not one failed
+    row per image with exit 1."""
+    fitted = _fake_batch(monkeypatch, tmp_path, names=("a", "b"))
+    assert fit_params.main(["batch", str(tmp_path), "--out", str(tmp_path / "t.csv"), "-q", *flags]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and fitted == []
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"measurement,reference\n\x80\x81,b.exr\n", "is not UTF-8"),
+    (b"measurement,reference,eta\na.exr,b.exr,high\n", "line 2: eta 'high' is not a number"),
+    (b"measurement,reference\na.exr,\n", "line 2: needs a measurement and a reference"),
+])
+def test_a_bad_manifest_is_named_with_its_line(monkeypatch, tmp_path, capsys, content, message):
+    fitted = _fake_batch(monkeypatch, tmp_path, names=("a",))
+    manifest = tmp_path / "m.csv"
+    manifest.write_bytes(content)
+    assert fit_params.main(["batch", "--manifest", str(manifest), "--out", str(tmp_path / "t.csv"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(manifest) in err and message in err and fitted == []
 
 
 def test_resuming_a_table_that_is_not_a_batch_table_names_it(monkeypatch, tmp_path, capsys):
