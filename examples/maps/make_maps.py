@@ -6,6 +6,9 @@
   (0.30, 0.36, 0.33), written as 8-bit sRGB.
 * ``checker_sigma_a.exr``: a 4 x 4 checker of two absorptions for the checker plane (Mertens
   et al. 2003's experiment): marble's sigma_a and ketchup-like (0.06, 0.25, 0.4) 1/mm, linear.
+* ``studio.exr``: a latitude-longitude environment, 128 x 256, linear half floats:
+  :func:`jsss.render.environment.procedural_map` ``"studio"`` (a dim room, a large soft key
+  front left, a small warm rim light behind).
 """
 
 import os
@@ -56,4 +59,8 @@ if __name__ == "__main__":
 
     iio.imwrite(os.path.join(HERE, "marble_veins.png"), marble_veins())
     write_exr(os.path.join(HERE, "checker_sigma_a.exr"), checker_sigma_a())
-    print("wrote marble_veins.png and checker_sigma_a.exr in", HERE)
+    from jsss.render.environment import procedural_map
+
+    write_exr(os.path.join(HERE, "studio.exr"), procedural_map("studio", (128, 256)).astype(np.float32),
+              pixel_type="half")
+    print("wrote marble_veins.png, checker_sigma_a.exr and studio.exr in", HERE)

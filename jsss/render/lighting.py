@@ -30,7 +30,16 @@ import numpy as np
 
 from ..diffusion.incidence import deposit_depth, incidence_law
 from ..fresnel import fresnel_transmittance
-from .mesh import Mesh
+from .environment import (
+    VISIBILITY_DIRECTIONS,
+    VISIBILITY_MAP_SIZE,
+    EnvironmentGeometry,
+    environment_geometry,
+    environment_irradiance,
+    environment_shadows,
+    fibonacci_directions,
+)
+from .mesh import Mesh, shadows_itself
 from .raster import OrthographicView, PerspectiveView, rasterize, surface_attributes
 
 __all__ = ["Light", "LightGeometry", "ShadowMap", "irradiance", "light_geometry", "node_irradiance", "shadow_map",
@@ -82,7 +91,17 @@ class ShadowMap:
 
 
 def shadow_map(mesh: Mesh, light: Light, *, size: int = 512) -> ShadowMap:
-    """Rasterize ``mesh`` from ``light``: an orthographic map for directional lights, a perspective one for points."""
+    """Rasterize ``mesh`` from ``light``: an orthographic map for directional lights, a perspective one for points.
+
+    For an :class:`~jsss.render.environment.Environment`, its tables and (where the mesh can
+    shadow itself, :func:`~jsss.render.mesh.shadows_itself`) its directional shadow maps
+    (:func:`~jsss.render.environment.environment_shadows`)."""
+    if light.kind == "environment":
+        maps = None
+        if shadows_itself(mesh):
+            maps = tuple(shadow_map(mesh, Light("directional", direction=tuple(-d)), size=VISIBILITY_MAP_SIZE)
+                         for d in fibonacci_directions(VISIBILITY_DIRECTIONS))
+        return environment_shadows(light, maps)
     lo, hi = mesh.bounds
     center = (lo + hi) / 2
     radius = float(np.linalg.norm(hi - lo) / 2) * 1.02  # orthographic maps cover the bounding sphere
@@ -137,7 +156,16 @@ class LightGeometry(NamedTuple):
 
 
 def light_geometry(positions, normals, valid, light: Light, shadow: ShadowMap) -> LightGeometry:
-    """Shadow test and thickness of ``positions`` (P, 3) against a light's shadow map."""
+    """Shadow test and thickness of ``positions`` (P, 3) against a light's shadow map (an
+    environment's: :class:`~jsss.render.environment.EnvironmentGeometry`)."""
+    if light.kind == "environment":
+        seen = None
+        if shadow.maps is not None:
+            seen = []
+            for d, m in zip(shadow.directions, shadow.maps):
+                g = light_geometry(positions, normals, valid, Light("directional", direction=tuple(-d)), m)
+                seen.append((g.cosine, g.visible))
+        return environment_geometry(normals, valid, shadow, seen)
     positions = np.asarray(positions, float)
     valid = np.asarray(valid, bool)
     if light.kind == "directional":
@@ -209,7 +237,8 @@ def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None, deposi
 
     Parameters
     ----------
-    lights : list of LightGeometry
+    lights : list of LightGeometry, or EnvironmentGeometry for an environment
+        (:func:`jsss.render.environment.environment_irradiance`)
     radiant : array, shape (L, C)
         Each light's colour times intensity (differentiable).
     eta : array, shape (C,)
@@ -224,6 +253,9 @@ def irradiance(lights: list[LightGeometry], radiant, eta, *, medium=None, deposi
     if medium is not None:
         law = incidence_law(medium)  # one H solve for every light
     for i, g in enumerate(lights):
+        if isinstance(g, EnvironmentGeometry):  # parallel light from every direction: no deposit depth
+            total = total + environment_irradiance(g, radiant[i], eta, law=law)
+            continue
         cos = jnp.clip(jnp.asarray(g.cosine, radiant.dtype), 0.0, 1.0)
         transmitted = fresnel_transmittance(cos[..., None], eta)
         if law is not None:
@@ -297,6 +329,8 @@ def translucent_transmission(blurred, weights, variances, lights: list[LightGeom
     """
     total = 0.0
     for g in lights:
+        if isinstance(g, EnvironmentGeometry):  # no single direction to cross the object along
+            continue
         d2 = jnp.asarray(g.thickness, blurred.dtype) ** 2
         attenuation = jnp.exp(-d2[None] / (2 * variances[:, None, None]))  # (n, S, S)
         front = lookup(blurred, g.front_uv, mask)  # (n, S, S, C)

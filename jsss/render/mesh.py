@@ -179,6 +179,22 @@ def is_closed(mesh: Mesh) -> bool:
     return bool(_welded_surface(mesh).is_watertight)
 
 
+def shadows_itself(mesh: Mesh) -> bool:
+    """True when part of the surface can hide the sky from another part: a closed surface whose
+    volume falls short of its convex hull's by more than 0.1 %. Convex bodies and open
+    surfaces (a plane, lit from above) see their whole upper hemisphere."""
+    from scipy.spatial import ConvexHull
+
+    if not is_closed(mesh):
+        return False
+    surface = _welded_surface(mesh)
+    try:
+        hull = ConvexHull(np.asarray(surface.vertices, float)).volume
+    except Exception:  # a flat or degenerate point set (Qhull refuses it): nothing to hide behind
+        return False
+    return bool(abs(float(surface.volume)) < (1 - 1e-3) * hull)
+
+
 def _grid_faces(rows: int, cols: int) -> np.ndarray:
     """Two counter-clockwise triangles per cell of a (rows+1) x (cols+1) vertex grid."""
     i, j = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
@@ -300,5 +316,10 @@ def load_obj(path) -> Mesh:
                          "texture-space diffusion needs a UV layout.")
     uv = np.asarray(uv, float).copy()
     uv[:, 1] = 1.0 - uv[:, 1]  # OBJ's v runs upwards, texture rows downwards
-    return Mesh(np.asarray(loaded.vertices), np.asarray(loaded.vertex_normals), uv,
-                np.asarray(loaded.faces), name=path.stem)
+    vertices = np.asarray(loaded.vertices, float)
+    if not np.all(np.isfinite(vertices)) or np.abs(vertices).max(initial=0.0) > 1e30:
+        raise ValueError(f"{path}: vertex coordinates must be finite and within 1e30 "
+                         f"(largest {np.nanmax(np.abs(vertices)):.3g}).")
+    with np.errstate(all="ignore"):  # trimesh's normals of a degenerate mesh: checked where it matters
+        normals = np.asarray(loaded.vertex_normals)
+    return Mesh(vertices, normals, uv, np.asarray(loaded.faces), name=path.stem)

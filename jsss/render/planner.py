@@ -61,8 +61,9 @@ from .calibration import (
     load_calibration,
     parse_knob,
 )
+from .environment import SCATTERING_CELLS, VISIBILITY_DIRECTIONS
 from .lighting import light_geometry, shadow_map
-from .mesh import distance_to_surface, is_closed
+from .mesh import distance_to_surface, is_closed, shadows_itself
 from .methods import (
     CONFIGURATIONS,
     ImageSpace,
@@ -159,7 +160,7 @@ class Plan:
                 return d.on
         raise KeyError(f"no pass named {name!r}; passes: {', '.join(PASS_ORDER)}.")
 
-    def replace(self, name: str, on: bool, why: str) -> "Plan":
+    def replace(self, name: str, on: bool, why: str) -> Plan:
         decisions = tuple(PassDecision(d.name, on, why) if d.name == name else d for d in self.decisions)
         return dataclasses.replace(self, decisions=decisions)
 
@@ -204,8 +205,8 @@ def frame_features(scene: Scene) -> FrameFeatures:
 
     ``backlit`` weighs each light by the irradiance it brings to the object's centre (a
     directional light its intensity, a point light intensity / distance^2, times its mean
-    colour) and counts those travelling towards the camera (their direction against the
-    camera's view axis); ``curvature`` is the profile's RMS radius over half the bounding
+    colour; an environment each direction's radiance times its solid angle) and counts those
+    travelling towards the camera (their direction against the camera's view axis); ``curvature`` is the profile's RMS radius over half the bounding
     box's smallest side of a closed object, 0 for an open one.
     """
     lo, hi = (np.asarray(b, float) for b in scene.mesh.bounds)
@@ -216,6 +217,10 @@ def frame_features(scene: Scene) -> FrameFeatures:
     view /= np.linalg.norm(view)
     behind = total = 0.0
     for light in scene.lights:
+        if light.kind == "environment":  # each direction weighed by the radiance arriving from it
+            beyond, power = light.incoming_power(view)
+            total, behind = total + power, behind + beyond
+            continue
         power = float(light.intensity * np.mean(light.color))
         if light.kind == "directional":
             travel = np.asarray(light.direction, float)
@@ -229,6 +234,28 @@ def frame_features(scene: Scene) -> FrameFeatures:
     curvature = rms / max(float(np.min(hi - lo)) / 2, 1e-9) if closed else 0.0
     return FrameFeatures(blur_pixels=rms / pixel, blur_frame=rms / (pixel * scene.camera.height), closed=closed,
                          backlit=behind / total if total > 0 else 0.0, curvature=float(curvature))
+
+
+def _irradiance_why(scene: Scene) -> str:
+    lights = [light for light in scene.lights if light.kind != "environment"]
+    parts = [f"{len(lights)} light(s) with Fresnel transmittance"] if lights else []
+    for env in (light for light in scene.lights if light.kind == "environment"):
+        parts.append(f"an environment ({env.source}) as a map of irradiance per normal, prefiltered with the Fresnel "
+                     "transmittance (and the oblique law where it runs); its reflection as the map blurred by the "
+                     f"specular lobe; its single scattering from {np.prod(SCATTERING_CELLS)} cells of the map")
+    return "; ".join(parts)
+
+
+def _shadows_why(scene: Scene) -> str:
+    parts = ["shadow map per light"] if any(light.kind != "environment" for light in scene.lights) else []
+    if any(light.kind == "environment" for light in scene.lights):
+        if shadows_itself(scene.mesh):
+            parts.append(f"the environment: {VISIBILITY_DIRECTIONS} directional shadow maps, since the closed "
+                         "surface falls short of its convex hull and can hide the sky from itself")
+        else:
+            parts.append("the environment: none, since the surface is convex or open and sees its whole upper "
+                         "hemisphere")
+    return "; ".join(parts)
 
 
 def _uv_unit_length(scene: Scene) -> float:
@@ -313,8 +340,8 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     if knob is None:
         knob = knob_label(method, samples=samples, normal_filter=normal_filter, target=texture_target)
 
-    decisions = {Pass.IRRADIANCE: (True, f"{len(scene.lights)} light(s) with Fresnel transmittance"),
-                 Pass.SHADOWS: (True, "shadow map per light"),
+    decisions = {Pass.IRRADIANCE: (True, _irradiance_why(scene)),
+                 Pass.SHADOWS: (True, _shadows_why(scene)),
                  Pass.CAMERA: (True, "rasterize, look up, tone map")}
     if basis is not None:
         variances = basis.variances
@@ -459,6 +486,8 @@ def _tsm_decision(scene: Scene, variances, weights, target):
     texels = bake_texels(scene.mesh, 64)
     thinnest = np.inf
     for light in scene.lights:
+        if light.kind == "environment":  # translucent shadow maps follow one direction
+            continue
         shadow = shadow_map(scene.mesh, light, size=128)
         g = light_geometry(texels.position, texels.normal, texels.mask, light, shadow)
         index = np.clip((g.front_uv * texels.size).astype(int), 0, texels.size - 1)

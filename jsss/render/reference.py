@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.integrate import trapezoid
 
+from .environment import EnvironmentGeometry, environment_irradiance
 from .image_space import camera_buffers
 from .lighting import irradiance, light_geometry, shadow_map
 from .profiles import exact_profile
@@ -47,6 +48,10 @@ def white_lambertian_radiance(scene: Scene) -> np.ndarray:
     for light in scene.lights:
         g = light_geometry(buffers.position, buffers.normal, buffers.mask, light,
                            shadow_map(scene.mesh, light, size=scene.shadow_map_size))
+        if isinstance(g, EnvironmentGeometry):  # eta = 1: no Fresnel, the kernel is the bare cosine
+            colour = jnp.asarray(np.asarray(light.color) * light.intensity, float)
+            radiance = radiance + np.asarray(environment_irradiance(g.astype(float), colour, jnp.ones(3)))
+            continue
         arriving = np.clip(np.asarray(g.cosine), 0, None) * np.asarray(g.falloff) * np.asarray(g.visible)
         radiance = radiance + arriving[..., None] * np.asarray(light.color) * light.intensity
     return np.asarray(radiance / np.pi * np.asarray(buffers.coverage)[..., None], dtype=float)

@@ -19,7 +19,9 @@ A scene file (lengths in mm, coefficients in 1/mm)::
                               # diffuse_reflectance (colour) and mean_free_path (EXR, mm)
 
     [[lights]]
-    type = "directional"      # or "point" with position = [x, y, z]
+    type = "directional"      # or "point" with position = [x, y, z], or "environment" with
+                              # map = "sky.exr" (linear lat-long, +z up; none: a constant color)
+                              # and rotation (degrees about +z): jsss.render.environment
     direction = [-1, 0.3, -1] # the direction light travels
     color = [1, 1, 1]
     intensity = 1.0
@@ -55,6 +57,7 @@ from ..medium import Medium
 from . import budget
 from . import mesh as _mesh
 from .artist_maps import coefficients_from_artist_maps
+from .environment import Environment
 from .lighting import Light
 from .raster import PerspectiveView
 from .surface_maps import (
@@ -246,18 +249,25 @@ def _geometry(t: _Table, base_dir: Path, allow_outside: bool = False) -> _mesh.M
                           arc_degrees=t.number("arc_degrees", 60.0, positive=True),
                           segments=_segments(t, "segments", 32, lambda n: 8 * n * n))
         else:
-            m = _mesh.load_obj(_inside(t, "path", Path(t.string("path")), base_dir, allow_outside))
+            obj = _inside(t, "path", Path(t.string("path")), base_dir, allow_outside)
+            m = _mesh.load_obj(obj)
     except ValueError as error:
         if isinstance(error, SceneError):
             raise
+        if shape == "obj":  # the file is at fault, not the key
+            t.fail("path", f"{obj}: {error}" if str(obj) not in str(error) else str(error))
         t.fail("shape", str(error))
     scale = t.number("scale", 1.0, positive=True)
     translate = t.vector("translate", 3, (0.0, 0.0, 0.0))
     t.check_unknown()
     size = float(np.ptp(np.asarray(m.vertices, float), axis=0).max())
+    where = ("path", f"{obj}: ") if shape == "obj" else ("shape", "")
     if not size > 0:
-        t.fail("shape", "the mesh has no extent: every vertex is at one point.")
+        t.fail(where[0], f"{where[1]}the mesh has no extent: every vertex is at one point.")
     extent = size * scale
+    if shape == "obj" and scale == 1.0 and not MIN_EXTENT <= size <= MAX_EXTENT:  # the file's units, not a scale
+        t.fail("path", f"{obj}: its vertices span {size:.3g} units; jsss works in millimetres, from {MIN_EXTENT:g} "
+                       f"to {MAX_EXTENT:g} mm across (give [geometry] scale = mm per unit of the file)")
     if not MIN_EXTENT <= extent <= MAX_EXTENT:
         t.fail("scale", f"{scale:g} makes the object {extent:.3g} mm across; jsss works in millimetres, from "
                         f"{MIN_EXTENT:g} mm to {MAX_EXTENT:g} mm (a scale of {MAX_EXTENT / size:.3g} at most "
@@ -273,6 +283,7 @@ MIN_EXTENT, MAX_EXTENT = 1e-3, 1e7  # mm: a micron to ten kilometres, where floa
 ETA_RANGE = (0.5, 4.0)  # relative indices of refraction a material may have (water 1.33, diamond 2.42)
 MAX_ROUGHNESS = 1.0  # Beckmann slope RMS m: 1 is already a matte, 45-degree facet spread
 MAX_RADIANT = 1e15  # colour x intensity: the frame multiplies it by factors up to ~1e20 and float32 ends at 3e38
+MAX_COEFFICIENT = 1e6  # 1/mm: a mean free path of 1 nm; beyond it no profile is resolved by any mesh or texture
 
 
 def _medium(t: _Table, prefix: str = "") -> Medium:
@@ -281,6 +292,10 @@ def _medium(t: _Table, prefix: str = "") -> Medium:
     eta = _eta(t, "eta")
     if np.any(sigma_a + sigma_s <= 0):
         t.fail("sigma_s_prime", "sigma_a + sigma_s_prime must be > 0 in every channel (no medium otherwise).")
+    for key, value in (("sigma_a", sigma_a), ("sigma_s_prime", sigma_s)):
+        if np.any(np.asarray(value) > MAX_COEFFICIENT):
+            t.fail(key, f"{np.asarray(value).tolist()} 1/mm: above {MAX_COEFFICIENT:g} (a mean free path under 1 nm) "
+                        "no profile is resolved; coefficients are in 1/mm (1 per cm is 0.1).")
     return Medium(sigma_a, sigma_s, eta)
 
 
@@ -427,15 +442,17 @@ def _material(t: _Table, source: str, base_dir: Path = Path("."), allow_outside:
     return material
 
 
-def _light(t: _Table) -> Light:
-    kind = t.string("type", ("point", "directional"))
+def _light(t: _Table, base_dir: Path = Path("."), allow_outside: bool = False) -> Light | Environment:
+    kind = t.string("type", ("point", "directional", "environment"))
     color = tuple(t.vector("color", 3, (1.0, 1.0, 1.0), nonnegative=True))
     intensity = t.number("intensity", 1.0, nonnegative=True)
     if intensity * max(color) > MAX_RADIANT:
         t.fail("intensity", f"{intensity:g} times the colour's {max(color):g} exceeds {MAX_RADIANT:g}: the frame "
                             "would overflow float32 once multiplied by the shading; scale the light and the "
                             "exposure down together.")
-    if kind == "point":
+    if kind == "environment":
+        light = _environment(t, color, intensity, base_dir, allow_outside)
+    elif kind == "point":
         light = Light("point", color, intensity, position=tuple(t.vector("position", 3)))
     else:
         direction = t.vector("direction", 3)
@@ -444,6 +461,26 @@ def _light(t: _Table) -> Light:
         light = Light("directional", color, intensity, direction=tuple(direction))
     t.check_unknown()
     return light
+
+
+def _environment(t: _Table, color, intensity, base_dir: Path, allow_outside: bool) -> Environment:
+    """``type = "environment"``: ``map`` (a linear latitude-longitude EXR, +z up) or none (a
+    constant ``color``), ``rotation`` in degrees about +z."""
+    rotation = t.number("rotation", 0.0)
+    if not t.has("map"):
+        return dataclasses.replace(Environment.constant(color, intensity), rotation=rotation)
+    path = _inside(t, "map", Path(t.string("map")), base_dir, allow_outside)
+    try:
+        radiance = read_map(path, "map", encoded_ok=False, section=t.name)[::-1]  # read_map gives texel order
+    except MapError as error:
+        raise SceneError(str(error)) from None
+    if np.any(radiance < 0):
+        t.fail("map", f"{path}: {int((radiance < 0).sum())} negative radiance value(s); radiance is never negative.")
+    peak = float(radiance.max()) * intensity * max(color)
+    if peak > MAX_RADIANT:
+        t.fail("intensity", f"the map's brightest pixel {float(radiance.max()):g} times intensity and colour exceeds "
+                            f"{MAX_RADIANT:g}; scale the light and the exposure down together.")
+    return Environment(np.ascontiguousarray(radiance), color, intensity, rotation, str(path))
 
 
 def _camera(t: _Table) -> PerspectiveView:
@@ -489,7 +526,10 @@ def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".", allow_outs
     entries = root.raw("lights")
     if not isinstance(entries, list) or not entries:
         root.fail("lights", "must be a non-empty array of tables ([[lights]]).")
-    lights = tuple(_light(_Table(e, f"lights[{i}]", source)) for i, e in enumerate(entries))
+    lights = tuple(_light(_Table(e, f"lights[{i}]", source), Path(base_dir), allow_outside)
+                   for i, e in enumerate(entries))
+    if sum(light.kind == "environment" for light in lights) > 1:
+        root.fail("lights", "has more than one environment; merge them into one map.")
     camera = _camera(_Table(root.raw("camera"), "camera", source))
     r = _Table(root.raw("render", {}), "render", source)
     accuracy = r.number("accuracy", 0.05, positive=True)
@@ -525,4 +565,8 @@ def load_scene(path, *, allow_outside: bool = False) -> Scene:
         raise SceneError(f"{path}: no such scene file.") from None
     except tomllib.TOMLDecodeError as error:
         raise SceneError(f"{path}: not valid TOML ({error}).") from None
+    except UnicodeDecodeError as error:  # TOML is UTF-8; a binary file or UTF-16 is not
+        raise SceneError(f"{path}: not a TOML scene: byte {error.start} is not UTF-8 ({error.reason}).") from None
+    except IsADirectoryError:
+        raise SceneError(f"{path}: is a folder, not a scene file.") from None
     return parse_scene(data, source=str(path), base_dir=path.parent, allow_outside=allow_outside)

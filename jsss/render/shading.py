@@ -25,12 +25,14 @@ distribution and exact dielectric Fresnel reflectance, as d'Eon uses for skin.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ..fresnel import exit_lobe, fresnel_reflectance
 from ..diffusion.incidence import deposit_depth
 from ..diffusion.single_scattering import single_scattering_albedo, single_scattering_brdf_from_cosines
+from .environment import EnvironmentGeometry, environment_specular
 from .lighting import depth_falloff
 
 __all__ = ["diffuse_radiance", "frame_radiance", "single_scattering", "specular_radiance", "surface_radiance",
@@ -76,6 +78,10 @@ def single_scattering(medium, normals, view_dirs, light_geometry, radiant, *, de
     albedo_table = single_scattering_albedo(medium, nodes, nodes=16)  # (ALBEDO_NODES, C)
     radiance, exitance = 0.0, 0.0
     for i, g in enumerate(light_geometry):
+        if isinstance(g, EnvironmentGeometry):
+            r, m = _environment_single_scattering(medium, g, n, v, cos_o, radiant[i], albedo_table)
+            radiance, exitance = radiance + r, exitance + m
+            continue
         to_light = jnp.asarray(g.to_light, radiant.dtype)
         cos_i = jnp.clip((n * to_light).sum(-1), 0.0, 1.0)
         arriving = (cos_i * jnp.asarray(g.falloff * g.visible, radiant.dtype))[..., None] * radiant[i]
@@ -83,12 +89,34 @@ def single_scattering(medium, normals, view_dirs, light_geometry, radiant, *, de
             arriving = arriving * depth_falloff(g, deposit_depth(deposit), radiant.dtype)
         tangential = (to_light * v).sum(-1) - cos_i * cos_o
         radiance = radiance + single_scattering_brdf_from_cosines(medium, cos_i, cos_o, tangential) * arriving
-        position = cos_i * (ALBEDO_NODES - 1)
-        below = jnp.clip(jnp.floor(position), 0, ALBEDO_NODES - 2)
-        fraction = (position - below)[..., None]
-        below = below.astype(jnp.int32)
-        albedo = (1 - fraction) * albedo_table[below] + fraction * albedo_table[below + 1]
-        exitance = exitance + albedo * arriving
+        exitance = exitance + _albedo_at(albedo_table, cos_i) * arriving
+    return radiance, exitance
+
+
+def _albedo_at(albedo_table, cos_i):
+    position = cos_i * (ALBEDO_NODES - 1)
+    below = jnp.clip(jnp.floor(position), 0, ALBEDO_NODES - 2)
+    fraction = (position - below)[..., None]
+    below = below.astype(jnp.int32)
+    return (1 - fraction) * albedo_table[below] + fraction * albedo_table[below + 1]
+
+
+def _environment_single_scattering(medium, g, n, v, cos_o, radiant, albedo_table):
+    """An environment's first bounce: its cells (:func:`jsss.render.environment.scattering_cells`)
+    as parallel lights, summed in a ``scan`` (one cell's arrays at a time), each times the
+    point's visible share."""
+    seen = jnp.asarray(g.visible, radiant.dtype)[..., None] * radiant
+
+    def cell(carry, item):
+        direction, power = item
+        cos_i = jnp.clip((n * direction).sum(-1), 0.0, 1.0)
+        arriving = cos_i[..., None] * power * seen
+        tangential = (direction * v).sum(-1) - cos_i * cos_o
+        radiance = carry[0] + single_scattering_brdf_from_cosines(medium, cos_i, cos_o, tangential) * arriving
+        return (radiance, carry[1] + _albedo_at(albedo_table, cos_i) * arriving), None
+
+    zero = jnp.zeros(n.shape[:-1] + (radiant.shape[-1],), radiant.dtype)
+    (radiance, exitance), _ = jax.lax.scan(cell, (zero, zero), (g.cell_directions, g.cell_power))
     return radiance, exitance
 
 
@@ -142,7 +170,8 @@ def surface_radiance(exitance, cos_view, eta, *, medium=None, normals=None, view
 
 
 def specular_radiance(normals, view_dirs, light_geometry, radiant, eta, *, roughness, weight):
-    """Sum over lights of a Beckmann microfacet lobe (Cook-Torrance), (..., C).
+    """Sum over lights of a Beckmann microfacet lobe (Cook-Torrance), (..., C); an environment's
+    reflection by :func:`jsss.render.environment.environment_specular`.
 
     Parameters
     ----------
@@ -159,6 +188,10 @@ def specular_radiance(normals, view_dirs, light_geometry, radiant, eta, *, rough
     cos_o = jnp.clip((n * v).sum(-1), 1e-4, 1.0)
     total = 0.0
     for i, g in enumerate(light_geometry):
+        if isinstance(g, EnvironmentGeometry):
+            total = total + environment_specular(g, normals, view_dirs, radiant[i], eta, roughness=roughness,
+                                                 weight=weight)
+            continue
         to_light = jnp.asarray(g.to_light, radiant.dtype)
         cos_i = jnp.clip((n * to_light).sum(-1), 0.0, 1.0)
         h = to_light + v

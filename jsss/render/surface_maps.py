@@ -214,17 +214,17 @@ def _read_encoded(path: Path) -> np.ndarray:
     return srgb_to_linear(pixels / scale)
 
 
-def read_map(path, key: str, *, encoded_ok: bool = True) -> np.ndarray:
+def read_map(path, key: str, *, encoded_ok: bool = True, section: str = "material.maps") -> np.ndarray:
     """A map file as linear values (H, W, 3) in texel order (the file's bottom row first).
 
     EXR is linear and read as is; 8- and 16-bit PNG, JPEG and TIFF are sRGB and decoded to
     linear (only where ``encoded_ok``: a map of lengths or coefficients must be a linear EXR).
-    A grey image is repeated over the three channels. Raises :class:`MapError` naming the file
-    and ``key``.
+    A grey image is repeated over the three channels. Raises :class:`MapError` naming the file,
+    the scene's ``section`` and ``key``.
     """
     path = Path(path)
     if not path.is_file():
-        raise MapError(f"{path}: [material.maps] {key}: no such file")
+        raise MapError(f"{path}: [{section}] {key}: no such file")
     try:
         if path.suffix.lower() == ".exr":
             pixels = _read_exr(path)
@@ -241,7 +241,7 @@ def read_map(path, key: str, *, encoded_ok: bool = True) -> np.ndarray:
         message = str(error)
         if message.startswith(str(path)):
             raise
-        raise MapError(f"{path}: [material.maps] {key}: {message}") from None
+        raise MapError(f"{path}: [{section}] {key}: {message}") from None
     pixels = np.broadcast_to(pixels, pixels.shape[:2] + (3,)) if pixels.shape[-1] == 1 else pixels
     return np.ascontiguousarray(pixels[::-1], dtype=float)
 

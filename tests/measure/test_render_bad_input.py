@@ -70,7 +70,7 @@ CASES = {  # name: (edit, extra flags, words the one line must hold)
     "translate 1e300": (_set("geometry", "translate", [1e300, 0.0, 0.0]), [], ["[geometry] translate"]),
     "sigma_s_prime 0": (_material(sigma_s_prime=0.0), [], ["[material] sigma_s_prime", "scatters"]),
     "roughness 1e300": (_set("material", "roughness", 1e300), [], ["[material] roughness", "Beckmann"]),
-    "all vertices at one point": (None, [], ["[geometry] shape", "one point"]),
+    "all vertices at one point": (None, [], ["[geometry] path", "point.obj", "one point"]),  # the file, not the key
     # and the rest of the scene, which already answered in one line: kept answering so
     "resolution zero": (_set("camera", "resolution", [0, 240]), [], ["[camera] resolution", "> 0"]),
     "fov 180": (_set("camera", "fov", 180.0), [], ["[camera] fov", "180"]),
@@ -85,6 +85,7 @@ CASES = {  # name: (edit, extra flags, words the one line must hold)
                     ["[material.maps] albedo", "nope.png"]),
     "exposure -1": (_set("render", "exposure", -1.0), [], ["[render] exposure", "> 0"]),
     "negative sigma_a": (_material(sigma_a=[-0.1, 0.01, 0.01]), [], ["[material] sigma_a", ">= 0"]),
+    "sigma_a 1e300": (_material(sigma_a=1e300), [], ["[material] sigma_a", "1/mm"]),  # had been numpy's own words
 }
 
 
@@ -104,6 +105,26 @@ def test_a_hostile_scene_is_one_line_naming_the_key_and_exit_2(tmp_path, capsys,
     assert len(lines) == 1 and "Traceback" not in err, err
     assert all(word in lines[0] for word in words), lines[0]
     assert not out.exists() and not out.with_suffix(".exr").exists()
+
+
+@pytest.mark.parametrize("content, words", [
+    (b"\x80\x81 not text", ["case.toml", "not UTF-8"]), ("[geometry]".encode("utf-16"), ["case.toml", "not UTF-8"]),
+])
+def test_a_scene_file_that_is_not_text_is_named(tmp_path, capsys, content, words):
+    path = tmp_path / "case.toml"
+    path.write_bytes(content)
+    assert render_command.main([str(path), "-o", str(tmp_path / "out.png"), "-q"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and all(word in lines[0] for word in words), lines
+
+
+def test_an_obj_with_a_vertex_at_1e300_is_named_without_warnings(tmp_path, capsys):
+    (tmp_path / "far.obj").write_text("v 0 0 0\nv 1e300 0 0\nv 0 10 0\nvt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\n"
+                                      "f 1/1/1 2/2/1 3/3/1\n")
+    path = _scene(tmp_path, "case", lambda data: data.__setitem__("geometry", {"shape": "obj", "path": "far.obj"}))
+    assert render_command.main([str(path), "-o", str(tmp_path / "out.png"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "far.obj: vertex coordinates must be finite" in err and "Warning" not in err
 
 
 def test_the_memory_limit_follows_what_the_machine_has(monkeypatch):
