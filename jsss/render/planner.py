@@ -46,6 +46,7 @@ accuracy target:
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -236,6 +237,24 @@ def frame_features(scene: Scene) -> FrameFeatures:
                          backlit=behind / total if total > 0 else 0.0, curvature=float(curvature))
 
 
+class ScaleWarning(UserWarning):
+    """The material's profile and the object differ so much in size that the scene's unit is
+    likely not millimetres."""
+
+
+def _check_units(scene: Scene, rms: float) -> None:
+    """Warn (:class:`ScaleWarning`) where the profile's RMS radius ``rms`` [mm] exceeds the
+    object's size: a scene written in metres (a marble ball of radius 0.02) plans a profile
+    27000 pixels wide and renders as a flat wash. jsss's unit is the millimetre."""
+    lo, hi = (np.asarray(b, float) for b in scene.mesh.bounds)
+    size = float(np.max(hi - lo))
+    if rms > size:
+        warnings.warn(f"{scene.source}: the material's light spreads {rms:.3g} mm (RMS radius) across an object "
+                      f"{size:.3g} mm wide: lengths in a scene are millimetres and coefficients 1/mm (a scene in "
+                      "metres: [geometry] scale = 1000 and its camera and light positions in mm)",
+                      ScaleWarning, stacklevel=3)
+
+
 def _irradiance_why(scene: Scene) -> str:
     lights = [light for light in scene.lights if light.kind != "environment"]
     parts = [f"{len(lights)} light(s) with Fresnel transmittance"] if lights else []
@@ -308,6 +327,7 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     features = frame_features(scene)
     blur = features.blur_pixels
     rms = blur * pixel
+    _check_units(scene, rms)
     unit = _uv_unit_length(scene)  # texture size: a texel no larger than the pixel footprint
     size = 64
     while size < scene.texture_size and unit / size > pixel:

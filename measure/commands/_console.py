@@ -189,7 +189,15 @@ def error_line(prog: str, error: BaseException) -> str:
 def exit_status(prog: str, command, *args) -> int:
     """Run ``command(*args)`` and return its exit status. Bad input (:class:`UsageError`, and the
     library's ``ValueError`` and ``OSError``: missing or unreadable files, invalid scenes,
-    measurements and arguments) is one line on stderr and status 2; an interrupt is 130."""
+    measurements and arguments) is one line on stderr and status 2; an interrupt is 130. The
+    library's warnings are one line each too: ``PROG: warning: MESSAGE`` (Python's own format
+    adds the warning's source line)."""
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        print(f"{prog}: warning: {str(message).splitlines()[0] if str(message) else category.__name__}",
+              file=sys.stderr)
+
+    warnings.showwarning = one_line
     try:
         return command(*args)
     except BrokenPipeError:  # `jsss | head`: the reader has what it wanted

@@ -441,3 +441,17 @@ def test_resuming_a_table_that_is_not_a_batch_table_names_it(monkeypatch, tmp_pa
     assert fit_params.main(["batch", str(tmp_path), "--out", str(out), "--resume", "-q"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no 'file' column" in err and str(out) in err and fitted == []
+
+
+def test_a_library_warning_is_one_line_naming_the_command(capsys):
+    import warnings
+
+    from measure.commands._console import exit_status
+
+    def command():
+        warnings.warn("something to know\nand a second line", UserWarning)
+        return 0
+
+    assert exit_status("jsss-render", command) == 0
+    err = capsys.readouterr().err
+    assert err == "jsss-render: warning: something to know\n"

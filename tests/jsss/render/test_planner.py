@@ -317,3 +317,22 @@ def test_the_planners_unspread_map_error_is_a_pessimistic_bound_on_the_veined_ma
     estimate = map_spread_error(scene, plan.blur_pixels * plan.pixel_size)
     assert measured > 0.01  # the veins are visible at the profile's scale
     assert measured <= estimate <= 3 * measured
+
+
+def test_a_scene_in_metres_is_told_that_lengths_are_millimetres(recwarn):
+    """A marble ball written in metres (radius 0.02) planned a profile 27000 pixels wide and
+    rendered a flat wash without a word; one in millimetres plans in silence."""
+    import warnings
+
+    from jsss.render.planner import ScaleWarning
+
+    def scene(radius, distance):
+        return parse_scene({"geometry": {"shape": "sphere", "radius": radius}, "material": {"name": "marble"},
+                            "lights": [{"type": "directional", "direction": [0.6, 0.8, -0.5]}],
+                            "camera": {"position": [0.0, -distance, 0.0], "resolution": [32, 24]}})
+
+    with pytest.warns(ScaleWarning, match=r"0.04 mm wide: lengths in a scene are millimetres"):
+        plan_scene(scene(0.02, 0.11), method="lambert")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ScaleWarning)
+        plan_scene(scene(20.0, 110.0), method="lambert")
