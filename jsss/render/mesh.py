@@ -32,6 +32,9 @@ class Mesh:
     wrap_u : bool
         The texture is periodic in ``u`` (a sphere's longitude): blurs wrap around.
     name : str
+    has_uvs : bool
+        False for a mesh whose file has no texture coordinates (``uvs`` are then zeros): the
+        pixel methods render it; texture space and surface maps need a UV layout.
     """
 
     vertices: np.ndarray
@@ -40,6 +43,7 @@ class Mesh:
     faces: np.ndarray
     wrap_u: bool = False
     name: str = "mesh"
+    has_uvs: bool = True
     _digest: list = field(default_factory=list, repr=False)
 
     def __post_init__(self):
@@ -72,7 +76,7 @@ class Mesh:
     def transformed(self, *, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> Mesh:
         """The mesh scaled about the origin, then moved."""
         return Mesh(self.vertices * scale + np.asarray(translate, float), self.normals, self.uvs,
-                    self.faces, self.wrap_u, self.name)
+                    self.faces, self.wrap_u, self.name, self.has_uvs)
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -311,15 +315,16 @@ def load_obj(path) -> Mesh:
     except Exception as error:  # trimesh raises many types for a bad file
         raise ValueError(f"{path}: not a readable OBJ mesh ({error}).") from error
     uv = getattr(loaded.visual, "uv", None)
-    if uv is None or len(uv) != len(loaded.vertices):
-        raise ValueError(f"{path}: the mesh has no per-vertex texture coordinates (vt); "
-                         "texture-space diffusion needs a UV layout.")
-    uv = np.asarray(uv, float).copy()
-    uv[:, 1] = 1.0 - uv[:, 1]  # OBJ's v runs upwards, texture rows downwards
+    has_uvs = uv is not None and len(uv) == len(loaded.vertices)
+    if has_uvs:
+        uv = np.asarray(uv, float).copy()
+        uv[:, 1] = 1.0 - uv[:, 1]  # OBJ's v runs upwards, texture rows downwards
+    else:  # the pixel methods need none; the planner keeps texture space off (jsss.render.planner)
+        uv = np.zeros((len(loaded.vertices), 2))
     vertices = np.asarray(loaded.vertices, float)
     if not np.all(np.isfinite(vertices)) or np.abs(vertices).max(initial=0.0) > 1e30:
         raise ValueError(f"{path}: vertex coordinates must be finite and within 1e30 "
                          f"(largest {np.nanmax(np.abs(vertices)):.3g}).")
     with np.errstate(all="ignore"):  # trimesh's normals of a degenerate mesh: checked where it matters
         normals = np.asarray(loaded.vertex_normals)
-    return Mesh(vertices, normals, uv, np.asarray(loaded.faces), name=path.stem)
+    return Mesh(vertices, normals, uv, np.asarray(loaded.faces), name=path.stem, has_uvs=has_uvs)

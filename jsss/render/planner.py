@@ -323,12 +323,15 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     if samples is not None and samples < 1:
         raise ValueError(f"samples must be >= 1 per pixel; got {samples}.")
     material = scene.material
+    if method == Method.TEXTURE_SPACE and not scene.mesh.has_uvs:
+        raise ValueError(f"{scene.source}: texture-space needs the mesh's UV layout, and {scene.mesh.name} has "
+                         "none (no vt lines); use lambert, normal-filtering or image-space.")
     pixel = _pixel_footprint(scene)
     features = frame_features(scene)
     blur = features.blur_pixels
     rms = blur * pixel
     _check_units(scene, rms)
-    unit = _uv_unit_length(scene)  # texture size: a texel no larger than the pixel footprint
+    unit = _uv_unit_length(scene) if scene.mesh.has_uvs else pixel  # a texel no larger than the pixel footprint
     size = 64
     while size < scene.texture_size and unit / size > pixel:
         size *= 2
@@ -343,6 +346,8 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
         basis = choose_basis(material, maps.sigma_a, maps.sigma_s_prime, target / 4)
     if method is None:
         estimates = tuple(estimate_methods(load_calibration(calibration), features, work))
+        if not scene.mesh.has_uvs:  # no UV layout to diffuse in
+            estimates = tuple(e for e in estimates if e.method != Method.TEXTURE_SPACE)
         if maps is not None:
             estimates = _with_maps(estimates, map_spread_error(scene, rms), basis)
         chosen, method_why = choose_method(estimates, target)

@@ -523,6 +523,9 @@ def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".", allow_outs
     root.check_unknown(_SECTIONS)
     mesh = _geometry(_Table(root.raw("geometry"), "geometry", source), Path(base_dir), allow_outside)
     material = _material(_Table(root.raw("material"), "material", source), source, Path(base_dir), allow_outside)
+    if material.maps is not None and material.maps.files and not mesh.has_uvs:
+        _Table(root.raw("material"), "material", source).fail(
+            "maps", f"the mesh {mesh.name} has no UV layout (no vt lines in its file); maps are read through it.")
     entries = root.raw("lights")
     if not isinstance(entries, list) or not entries:
         root.fail("lights", "must be a non-empty array of tables ([[lights]]).")

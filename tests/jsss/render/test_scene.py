@@ -63,16 +63,56 @@ def test_texel_area_sums_to_the_surface_area(mesh):
     assert np.allclose(np.linalg.norm(texels.normal[texels.mask], axis=-1), 1.0)
 
 
-def test_obj_with_uvs_loads_and_without_uvs_is_refused(tmp_path):
+def test_obj_with_uvs_loads_and_without_uvs_loads_marked(tmp_path):
     good = tmp_path / "quad.obj"
     good.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
                     "vn 0 0 1\nf 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n")
     mesh = load_obj(good)
     assert len(mesh.faces) == 2 and mesh.uvs.min() >= 0 and mesh.uvs.max() <= 1
-    bad = tmp_path / "nouv.obj"
-    bad.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n")
-    with pytest.raises(ValueError, match="nouv.obj: the mesh has no per-vertex texture coordinates"):
-        load_obj(bad)
+    assert mesh.has_uvs
+    bare = tmp_path / "nouv.obj"
+    bare.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n")
+    assert not load_obj(bare).has_uvs
+
+
+def _uvless_sphere(folder):
+    """A sphere OBJ with positions and faces only (what a scan or a CAD export often is)."""
+    import trimesh
+
+    trimesh.creation.icosphere(subdivisions=3, radius=20.0).export(folder / "ball.obj", include_texture=False)
+    return {"geometry": {"shape": "obj", "path": "ball.obj"}, "material": {"name": "marble"},
+            "lights": [{"type": "directional", "direction": [0.6, 0.8, -0.5]}],
+            "camera": {"position": [0.0, -110.0, 30.0], "resolution": [40, 30]}}
+
+
+@pytest.mark.parametrize("method", ["lambert", "image-space", "normal-filtering"])
+def test_a_mesh_without_uvs_renders_with_the_pixel_methods(tmp_path, method):
+    """It had been refused for every method, though only texture space and maps need a UV layout."""
+    import jax.numpy as jnp
+
+    from jsss.render import parse_scene, plan_scene, render
+
+    scene = parse_scene(_uvless_sphere(tmp_path), base_dir=tmp_path)
+    assert not scene.mesh.has_uvs
+    radiance = np.asarray(render(scene, plan_scene(scene, method=method), dtype=jnp.float64).radiance)
+    assert np.all(np.isfinite(radiance)) and radiance.max() > 0
+
+
+def test_a_mesh_without_uvs_is_planned_away_from_texture_space(tmp_path):
+    from jsss.render import Method, SceneError, parse_scene, plan_scene
+
+    data = _uvless_sphere(tmp_path)
+    scene = parse_scene(data, base_dir=tmp_path)
+    plan = plan_scene(scene)
+    assert plan.method != Method.TEXTURE_SPACE and all(e.method != Method.TEXTURE_SPACE for e in plan.estimates)
+    with pytest.raises(ValueError, match="texture-space needs the mesh's UV layout, and ball has none"):
+        plan_scene(scene, method="texture-space")
+    import imageio.v3 as iio
+
+    iio.imwrite(tmp_path / "c.png", np.full((4, 4, 3), 200, np.uint8))
+    data["material"]["maps"] = {"albedo": "c.png"}
+    with pytest.raises(SceneError, match=r"\[material\] maps: the mesh ball has no UV layout"):
+        parse_scene(data, base_dir=tmp_path)
 
 
 def _run(*args, cwd):
