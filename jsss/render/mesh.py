@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Mesh", "box", "distance_to_rim", "distance_to_surface", "fin", "is_closed", "load_obj", "plane", "uv_sphere",
-           "weld"]
+__all__ = ["MESH_FILES", "Mesh", "box", "distance_to_rim", "distance_to_surface", "fin", "is_closed", "load_mesh",
+           "load_obj", "plane", "uv_sphere", "weld"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -297,28 +297,48 @@ def fin(height: float = 30.0, radius: float = 40.0, thickness: float = 2.0, *, a
     return Mesh(v, nn, t, _outward(v, nn, f), name=f"fin(t={thickness:g})")
 
 
+MESH_FILES = {".obj": 1.0, ".gltf": 1000.0, ".glb": 1000.0}  # suffix: mm per unit of the file (glTF 2.0 is in metres)
+
+
 def load_obj(path) -> Mesh:
-    """Read a triangle mesh with texture coordinates from a Wavefront OBJ (via trimesh).
+    """:func:`load_mesh`'s mesh, without its texture (kept for OBJ callers)."""
+    return load_mesh(path)[0]
+
+
+def load_mesh(path) -> tuple[Mesh, np.ndarray | None]:
+    """Read a triangle mesh, its texture coordinates and its base-colour texture from a
+    Wavefront OBJ (+ MTL) or a glTF 2.0 file (.gltf, .glb), via trimesh.
+
+    Returns the mesh in the file's own units (:data:`MESH_FILES` says what they are in mm) and
+    the base-colour texture as linear RGB (H, W, 3) in texel order (the image's bottom row
+    first, as :func:`jsss.render.surface_maps.read_map` reads a map), times the material's
+    base-colour factor; None where the file has no texture or no UVs. A file without UVs
+    gives a mesh marked ``has_uvs = False``.
 
     Raises
     ------
     ValueError
-        The file is missing, not a mesh, or has no UVs; the message names the file.
+        The file is missing or not a mesh, a texture it names is missing, or a coordinate is
+        not finite; the message names the file.
     """
     import trimesh
 
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"{path}: no such OBJ file.")
+        raise ValueError(f"{path}: no such mesh file.")
+    if path.suffix.lower() not in MESH_FILES:
+        raise ValueError(f"{path}: a mesh must be {', '.join(MESH_FILES)}; got {path.suffix or 'no suffix'}.")
+    _check_textures_exist(path)
     try:
         loaded = trimesh.load(path, process=False, force="mesh")
     except Exception as error:  # trimesh raises many types for a bad file
-        raise ValueError(f"{path}: not a readable OBJ mesh ({error}).") from error
+        raise ValueError(f"{path}: not a readable mesh ({type(error).__name__}: {error}).") from None
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise ValueError(f"{path}: holds no triangles.")
     uv = getattr(loaded.visual, "uv", None)
     has_uvs = uv is not None and len(uv) == len(loaded.vertices)
-    if has_uvs:
-        uv = np.asarray(uv, float).copy()
-        uv[:, 1] = 1.0 - uv[:, 1]  # OBJ's v runs upwards, texture rows downwards
+    if has_uvs:  # OBJ's convention for every format (trimesh flips glTF's v on reading): v runs up the
+        uv = np.asarray(uv, float).copy()  # image, and maps are read bottom row first (surface_maps.read_map)
     else:  # the pixel methods need none; the planner keeps texture space off (jsss.render.planner)
         uv = np.zeros((len(loaded.vertices), 2))
     vertices = np.asarray(loaded.vertices, float)
@@ -327,4 +347,50 @@ def load_obj(path) -> Mesh:
                          f"(largest {np.nanmax(np.abs(vertices)):.3g}).")
     with np.errstate(all="ignore"):  # trimesh's normals of a degenerate mesh: checked where it matters
         normals = np.asarray(loaded.vertex_normals)
-    return Mesh(vertices, normals, uv, np.asarray(loaded.faces), name=path.stem, has_uvs=has_uvs)
+    mesh = Mesh(vertices, normals, uv, np.asarray(loaded.faces), name=path.stem, has_uvs=has_uvs)
+    return mesh, (_base_colour(loaded.visual) if has_uvs else None)
+
+
+def _base_colour(visual) -> np.ndarray | None:
+    """The base-colour texture of a trimesh visual (glTF's baseColorTexture times its factor, an
+    MTL's map_Kd), linear, in texel order; None without one."""
+    from .surface_maps import srgb_to_linear
+
+    material = getattr(visual, "material", None)
+    image = getattr(material, "baseColorTexture", None)
+    if image is None:
+        image = getattr(material, "image", None)
+    if image is None:
+        return None
+    rgb = srgb_to_linear(np.asarray(image.convert("RGB"), float) / 255.0)
+    factor = getattr(material, "baseColorFactor", None)
+    if factor is not None:  # trimesh keeps it as RGBA bytes
+        rgb = rgb * (np.asarray(factor, float)[:3] / 255.0)
+    return np.ascontiguousarray(rgb[::-1])
+
+
+def _check_textures_exist(path: Path) -> None:
+    """A texture the file names that is not there is an error naming both (trimesh would load
+    the mesh without it, and the object would render white)."""
+    import json
+
+    names = []
+    if path.suffix.lower() == ".obj":
+        text = path.read_text(errors="replace")
+        for library in (line.split(None, 1)[1].strip() for line in text.splitlines()
+                        if line.startswith("mtllib ") and len(line.split(None, 1)) > 1):
+            mtl = path.parent / library
+            if not mtl.is_file():
+                raise ValueError(f"{path}: its material library {library} is missing (mtllib).")
+            names += [line.split()[-1] for line in mtl.read_text(errors="replace").splitlines()
+                      if line.strip().startswith("map_Kd ")]
+    elif path.suffix.lower() == ".gltf":
+        try:
+            document = json.loads(path.read_text())
+        except (ValueError, UnicodeDecodeError) as error:
+            raise ValueError(f"{path}: not a glTF file (its JSON: {error}).") from None
+        names += [item["uri"] for item in document.get("images", []) + document.get("buffers", [])
+                  if isinstance(item, dict) and "uri" in item and not str(item["uri"]).startswith("data:")]
+    for name in names:
+        if not (path.parent / name).is_file():
+            raise ValueError(f"{path}: the texture or buffer {name} it names is missing (beside the file).")

@@ -3,8 +3,10 @@
 A scene file (lengths in mm, coefficients in 1/mm)::
 
     [geometry]
-    shape = "sphere"          # sphere | plane | box | fin | obj
-    radius = 20.0             # shape parameters (see jsss.render.mesh); obj: path = "head.obj"
+    shape = "sphere"          # sphere | plane | box | fin | mesh (obj: the same)
+    radius = 20.0             # shape parameters (see jsss.render.mesh); mesh: path = "head.glb" (OBJ or
+                              # glTF; units = "mm" | "cm" | "m" | "in", default mm for OBJ and m for glTF;
+                              # textures = true: its base-colour texture is the colour map)
 
     [material]
     name = "marble"           # a Jensen 2001 material, or sigma_a/sigma_s_prime/eta,
@@ -201,7 +203,8 @@ class _Table:
 
 
 _SECTIONS = ("geometry", "material", "lights", "camera", "render")
-_SHAPES = ("sphere", "plane", "box", "fin", "obj")
+_SHAPES = ("sphere", "plane", "box", "fin", "mesh", "obj")  # obj: the older name of mesh
+UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}  # [geometry] units of a mesh file
 
 
 def _segments(t: _Table, key: str, default: int, triangles) -> int:
@@ -228,8 +231,11 @@ def _inside(t: _Table, key: str, path: Path, base_dir: Path, allow_outside: bool
     return full
 
 
-def _geometry(t: _Table, base_dir: Path, allow_outside: bool = False) -> _mesh.Mesh:
+def _geometry(t: _Table, base_dir: Path, allow_outside: bool = False) -> tuple[_mesh.Mesh, np.ndarray | None, str]:
+    """The mesh in mm, and a mesh file's base-colour texture (linear, texel order; None without
+    one, or with ``textures = false``) and where it came from."""
     shape = t.string("shape", _SHAPES)
+    base_colour, unit = None, 1.0
     try:
         if shape == "sphere":
             radius = t.number("radius", 10.0, positive=True)
@@ -250,24 +256,31 @@ def _geometry(t: _Table, base_dir: Path, allow_outside: bool = False) -> _mesh.M
                           segments=_segments(t, "segments", 32, lambda n: 8 * n * n))
         else:
             obj = _inside(t, "path", Path(t.string("path")), base_dir, allow_outside)
-            m = _mesh.load_obj(obj)
+            default = _mesh.MESH_FILES.get(obj.suffix.lower(), 1.0)
+            unit = UNITS_MM[t.string("units", tuple(UNITS_MM), next(k for k, v in UNITS_MM.items() if v == default))]
+            m, base_colour = _mesh.load_mesh(obj)
+            textures = t.raw("textures", True)
+            if not isinstance(textures, bool):
+                t.fail("textures", f"must be true or false; got {textures!r}.")
+            if not textures:
+                base_colour = None
     except ValueError as error:
         if isinstance(error, SceneError):
             raise
-        if shape == "obj":  # the file is at fault, not the key
+        if shape in ("mesh", "obj"):  # the file is at fault, not the key
             t.fail("path", f"{obj}: {error}" if str(obj) not in str(error) else str(error))
         t.fail("shape", str(error))
-    scale = t.number("scale", 1.0, positive=True)
+    scale = t.number("scale", 1.0, positive=True) * unit
     translate = t.vector("translate", 3, (0.0, 0.0, 0.0))
     t.check_unknown()
     size = float(np.ptp(np.asarray(m.vertices, float), axis=0).max())
-    where = ("path", f"{obj}: ") if shape == "obj" else ("shape", "")
+    where = ("path", f"{obj}: ") if shape in ("mesh", "obj") else ("shape", "")
     if not size > 0:
         t.fail(where[0], f"{where[1]}the mesh has no extent: every vertex is at one point.")
     extent = size * scale
-    if shape == "obj" and scale == 1.0 and not MIN_EXTENT <= size <= MAX_EXTENT:  # the file's units, not a scale
+    if shape in ("mesh", "obj") and scale == unit and not MIN_EXTENT <= size * unit <= MAX_EXTENT:  # the file's units
         t.fail("path", f"{obj}: its vertices span {size:.3g} units; jsss works in millimetres, from {MIN_EXTENT:g} "
-                       f"to {MAX_EXTENT:g} mm across (give [geometry] scale = mm per unit of the file)")
+                       f"to {MAX_EXTENT:g} mm across (give [geometry] units = \"mm\", \"cm\", \"m\" or \"in\", or a scale)")
     if not MIN_EXTENT <= extent <= MAX_EXTENT:
         t.fail("scale", f"{scale:g} makes the object {extent:.3g} mm across; jsss works in millimetres, from "
                         f"{MIN_EXTENT:g} mm to {MAX_EXTENT:g} mm (a scale of {MAX_EXTENT / size:.3g} at most "
@@ -276,7 +289,7 @@ def _geometry(t: _Table, base_dir: Path, allow_outside: bool = False) -> _mesh.M
         t.fail("translate", f"must lie within {MAX_EXTENT:g} mm of the origin; got {translate.tolist()}.")
     if scale != 1.0 or np.any(translate != 0):
         m = m.transformed(scale=scale, translate=translate)
-    return m
+    return m, base_colour, (f"{obj} (its base-colour texture)" if base_colour is not None else "")
 
 
 MIN_EXTENT, MAX_EXTENT = 1e-3, 1e7  # mm: a micron to ten kilometres, where float32 still resolves a profile
@@ -364,7 +377,8 @@ def _maps(t: _Table, material: Material, texturing: str, base_dir: Path, allow_o
     return SurfaceMaps(read.get("albedo"), sigma_a, sigma_s, texturing, tuple((k, str(p)) for k, p in files.items()))
 
 
-def _material(t: _Table, source: str, base_dir: Path = Path("."), allow_outside: bool = False) -> Material:
+def _material(t: _Table, source: str, base_dir: Path = Path("."), allow_outside: bool = False,
+              mesh_colour=(None, "")) -> Material:
     surface = dict(specular=t.number("specular", 1.0, nonnegative=True),
                    roughness=t.number("roughness", 0.35, positive=True))
     if surface["roughness"] > MAX_ROUGHNESS:
@@ -437,6 +451,13 @@ def _material(t: _Table, source: str, base_dir: Path = Path("."), allow_outside:
     material = dataclasses.replace(material, normalize_profile=normalize)
     if t.has("maps"):
         maps = _maps(_Table(t.raw("maps"), "material.maps", source), material, texturing, base_dir, allow_outside)
+        material = dataclasses.replace(material, maps=maps)
+    colour, colour_source = mesh_colour
+    if colour is not None and (material.maps is None or material.maps.albedo is None):
+        # the mesh file's base-colour texture is the colour map, unless [material.maps] gives one
+        old = material.maps
+        maps = SurfaceMaps(colour, None if old is None else old.sigma_a, None if old is None else old.sigma_s_prime,
+                           texturing, (("albedo", colour_source),) + (() if old is None else old.files))
         material = dataclasses.replace(material, maps=maps)
     t.check_unknown()
     return material
@@ -521,8 +542,10 @@ def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".", allow_outs
     root = _Table(data, "scene", source)
     # Unknown sections first: a misspelt [materail] must not be reported as a missing [material].
     root.check_unknown(_SECTIONS)
-    mesh = _geometry(_Table(root.raw("geometry"), "geometry", source), Path(base_dir), allow_outside)
-    material = _material(_Table(root.raw("material"), "material", source), source, Path(base_dir), allow_outside)
+    mesh, base_colour, colour_source = _geometry(_Table(root.raw("geometry"), "geometry", source), Path(base_dir),
+                                                 allow_outside)
+    material = _material(_Table(root.raw("material"), "material", source), source, Path(base_dir), allow_outside,
+                         mesh_colour=(base_colour, colour_source))
     if material.maps is not None and material.maps.files and not mesh.has_uvs:
         _Table(root.raw("material"), "material", source).fail(
             "maps", f"the mesh {mesh.name} has no UV layout (no vt lines in its file); maps are read through it.")
