@@ -342,9 +342,11 @@ def load_mesh(path) -> tuple[Mesh, np.ndarray | None]:
     else:  # the pixel methods need none; the planner keeps texture space off (jsss.render.planner)
         uv = np.zeros((len(loaded.vertices), 2))
     vertices = np.asarray(loaded.vertices, float)
-    if not np.all(np.isfinite(vertices)) or np.abs(vertices).max(initial=0.0) > 1e30:
-        raise ValueError(f"{path}: vertex coordinates must be finite and within 1e30 "
-                         f"(largest {np.nanmax(np.abs(vertices)):.3g}).")
+    if not np.all(np.isfinite(vertices)):
+        raise ValueError(f"{path}: {int(np.size(vertices) - np.isfinite(vertices).sum())} vertex coordinate(s) are "
+                         "NaN or infinite.")
+    if np.abs(vertices).max(initial=0.0) > 1e30:
+        raise ValueError(f"{path}: vertex coordinates must lie within 1e30 (largest {np.abs(vertices).max():.3g}).")
     with np.errstate(all="ignore"):  # trimesh's normals of a degenerate mesh: checked where it matters
         normals = np.asarray(loaded.vertex_normals)
     mesh = Mesh(vertices, normals, uv, np.asarray(loaded.faces), name=path.stem, has_uvs=has_uvs)
@@ -376,6 +378,9 @@ def _check_textures_exist(path: Path) -> None:
 
     names = []
     if path.suffix.lower() == ".obj":
+        with open(path, "rb") as handle:
+            if b"\x00" in handle.read(1 << 16):
+                raise ValueError(f"{path}: a binary file, not a text OBJ.")
         text = path.read_text(errors="replace")
         for library in (line.split(None, 1)[1].strip() for line in text.splitlines()
                         if line.startswith("mtllib ") and len(line.split(None, 1)) > 1):
