@@ -85,14 +85,15 @@ def _errors(estimate, truth):
     return float(np.sqrt(np.mean(relative**2))), float(np.max(np.abs(relative)))
 
 
-def _sphere(material, light, resolution):
+def sphere_scene(material, light, resolution=(64, 64), *, texture_size=512, accuracy=0.02):
+    """A 20 mm sphere seen from 110 mm under one light (the benchmark's and the tests' scene)."""
     return parse_scene({
         "geometry": {"shape": "sphere", "radius": 20.0},
         "material": material,
         "lights": [light],
         "camera": {"position": [0.0, -110.0, 20.0], "look_at": [0.0, 0.0, 0.0], "fov": 25,
                    "resolution": list(resolution)},
-        "render": {"texture_size": 512, "accuracy": 0.02},
+        "render": {"texture_size": texture_size, "accuracy": accuracy},
     }, allow_outside=True)
 
 
@@ -111,7 +112,7 @@ def furnace_rows(resolution=(64, 64)):
     """(method, single scattering, worst |L - 1| per channel, mean L - 1) over the pixels the
     sphere covers fully."""
     material = {"sigma_a": 0.0, "sigma_s_prime": [40.0, 60.0, 100.0], "eta": [1.0, 1.3, 1.5]}
-    scene = _sphere(material, {"type": "environment"}, resolution)
+    scene = sphere_scene(material, {"type": "environment"}, resolution)
     full = np.asarray(camera_buffers(scene.mesh, scene.camera).coverage) > 0.999
     rows = []
     for single in (False, True):
@@ -193,7 +194,7 @@ def truth_rows(mi, folder, *, resolution, spp, chunks, methods):
     for label, light, emitter in _cases(folder):
         for material in ("marble", "skin1"):
             medium = jensen2001(material)
-            scene = _sphere({"sigma_a": np.asarray(medium.sigma_a, float).tolist(),
+            scene = sphere_scene({"sigma_a": np.asarray(medium.sigma_a, float).tolist(),
                              "sigma_s_prime": np.asarray(medium.sigma_s_prime, float).tolist(), "eta": 1.0,
                              "profile": "transport", "specular": 0.0}, light, resolution)
             ply = _mesh_file(scene, folder)

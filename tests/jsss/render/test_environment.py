@@ -55,14 +55,9 @@ def test_nine_spherical_harmonics_are_the_worse_choice_under_a_sun():
 
 
 def _sphere(material, light, resolution=(48, 48)):
-    return parse_scene({
-        "geometry": {"shape": "sphere", "radius": 20.0},
-        "material": material,
-        "lights": [light],
-        "camera": {"position": [0.0, -110.0, 20.0], "look_at": [0.0, 0.0, 0.0], "fov": 25,
-                   "resolution": list(resolution)},
-        "render": {"texture_size": 256, "accuracy": 0.05},
-    }, allow_outside=True)
+    from benchmarks.environment import sphere_scene  # the benchmark's scene, at a test's size
+
+    return sphere_scene(material, light, resolution, texture_size=256, accuracy=0.05)
 
 
 NON_ABSORBING = {"sigma_a": 0.0, "sigma_s_prime": [40.0, 60.0, 100.0], "eta": [1.0, 1.3, 1.5]}
