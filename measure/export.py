@@ -233,21 +233,29 @@ def cycles_colour_from_albedo(alpha, g=0.0):
     return hi
 
 
+CYCLES_RADIUS_SCALE = 4 * np.pi  # Cycles multiplies a random walk's radius by 0.25 / pi (bssrdf_setup_radius)
+
+
 def blender_principled(medium, *, g=0.0, unit_mm=1.0):
     r"""Principled BSDF inputs for Cycles' random-walk subsurface scattering.
 
-    Cycles (``kernel/integrator/subsurface_random_walk.h``) turns a colour A and a radius d
-    (``Subsurface Radius`` x ``Subsurface Scale``, scene units) into
-    :math:`\sigma_t = 1 / (d (1 - g))` and a single-scattering albedo
-    :math:`\alpha = f_g(A)` (its fit). Inverting that for our medium, with
+    Cycles first scales the radius R (``Subsurface Radius`` x ``Subsurface Scale``, scene
+    units) by :math:`1/4\pi` "so it gives similar looking result to older Cubic, Gaussian and
+    Burley models" (``bssrdf_setup_radius`` in ``kernel/closure/bssrdf.h``, read in the sources
+    the bpy 4.5.15 wheel ships), then turns the colour A and :math:`d = R / 4\pi` into
+    :math:`\sigma_t = 1 / (d (1 - g))` and a single-scattering albedo :math:`\alpha = f_g(A)`
+    (``kernel/integrator/subsurface_random_walk.h``). Inverting that for our medium, with
     :math:`\sigma_s = \sigma_s' / (1 - g)` and :math:`\sigma_t = \sigma_a + \sigma_s`:
 
     .. math::
 
-        d = \frac{1}{(1 - g)\,\sigma_t} = \frac{1}{(1 - g)\,\sigma_a + \sigma_s'}, \qquad
+        R = \frac{4\pi}{(1 - g)\,\sigma_t} = \frac{4\pi}{(1 - g)\,\sigma_a + \sigma_s'}, \qquad
         A = f_g^{-1}\!\left(\frac{\sigma_s}{\sigma_t}\right).
 
-    With g = 0, d is the transport mean free path 1/(sigma_a + sigma_s'). A is Cycles' own
+    With g = 0, R is 4 pi transport mean free paths. (Until 2026-12-04 the export left out the
+    4 pi: Cycles rendered the material with a mean free path 12.6 times too short, +4 to +123 %
+    bright against F0 + T0 R_d in a white furnace; a half-shadow edge and a 1 mm slab over
+    black measured a best-fit scale of 12.75.) A is Cycles' own
     parameter, not the material's diffuse reflectance: at eta = 1, g = 0 the transport
     tables' total reflectance is 0.77 A at A = 0.05 and 1.05 A at A = 0.95.
 
@@ -267,7 +275,7 @@ def blender_principled(medium, *, g=0.0, unit_mm=1.0):
         warnings.warn(f"single-scattering albedo {alpha.max():.7f} is above the {reachable:.7f} that Cycles' colour "
                       "fit reaches; its colour is clamped there (a slightly darker material)", stacklevel=2)
     colour = cycles_colour_from_albedo(np.minimum(alpha, reachable), g)
-    radius = 1.0 / ((1.0 - float(g)) * sigma_t)
+    radius = CYCLES_RADIUS_SCALE / ((1.0 - float(g)) * sigma_t)
     return {"base_color": colour.tolist(), "subsurface_radius": radius.tolist(), "subsurface_scale": 1.0,
             "subsurface_anisotropy": float(g), "ior": eta, "subsurface_weight": 1.0,
             "subsurface_method": "RANDOM_WALK"}

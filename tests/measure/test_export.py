@@ -55,17 +55,21 @@ def test_pbrt_material_parses_and_holds_the_medium():
 
 @pytest.mark.parametrize("g", [0.0, 0.5, 0.9])
 def test_blender_parameters_give_back_the_medium_through_cycles_own_map(g):
-    """Cycles turns colour A and radius d into sigma_t = 1/(d (1 - g)) and alpha = f_g(A); fed
-    our export, that map returns the medium's sigma_a and sigma_s = sigma_s'/(1 - g)."""
+    """Cycles 4.x scales radius R by 0.25 / pi (kernel/closure/bssrdf.h, bssrdf_setup_radius), then
+    turns colour A and d = R / 4 pi into sigma_t = 1/(d (1 - g)) and alpha = f_g(A)
+    (subsurface_random_walk.h); fed our export, that map returns the medium's sigma_a and
+    sigma_s = sigma_s'/(1 - g). This is our reading of Cycles' sources, not a Cycles render."""
     medium = Medium(sigma_a=[0.01, 0.2, 1.0], sigma_s_prime=[2.0, 1.0, 0.5], eta=1.4)
     p = export.blender_principled(medium, g=g)
-    sigma_t = 1.0 / (np.asarray(p["subsurface_radius"]) * p["subsurface_scale"] * (1 - g))
+    d = np.asarray(p["subsurface_radius"]) * p["subsurface_scale"] * 0.25 / np.pi  # bssrdf_setup_radius
+    sigma_t = 1.0 / (d * (1 - g))
     alpha = export.cycles_albedo_from_colour(p["base_color"], g)
     np.testing.assert_allclose(sigma_t * (1 - alpha), medium.sigma_a, rtol=1e-6)
     np.testing.assert_allclose(sigma_t * alpha * (1 - g), medium.sigma_s_prime, rtol=1e-6)
     assert p["subsurface_anisotropy"] == g and p["ior"] == pytest.approx(1.4)
-    if g == 0:  # the radius is then the transport mean free path
-        np.testing.assert_allclose(p["subsurface_radius"], 1 / (np.asarray(medium.sigma_a) + medium.sigma_s_prime))
+    if g == 0:  # the radius is then 4 pi transport mean free paths
+        np.testing.assert_allclose(p["subsurface_radius"],
+                                   4 * np.pi / (np.asarray(medium.sigma_a) + medium.sigma_s_prime))
     ast.parse(export.blender_python(medium, g=g))
 
 
