@@ -355,8 +355,8 @@ def _fit(args) -> int:
                              specular=material.specular,
                              comment=f"fitted by jsss-render fit ({summary['profile_model']} profile, "
                                      f"{summary['method']}); errors in the .fit.json")
-    summary = json_safe(summary)  # an unconstrained parameter's infinite error is null in JSON
-    files = {out / f"{stem}.fit.json": json.dumps(summary, indent=2, allow_nan=False) + "\n",
+    as_json = json_safe(summary)  # an unconstrained parameter's infinite error is null in JSON (inf in the table)
+    files = {out / f"{stem}.fit.json": json.dumps(as_json, indent=2, allow_nan=False) + "\n",
              out / f"{stem}.fit.toml": scene_with_material(Path(args.scene).read_text(), fitted)}
     for path, text in files.items():
         write_text(path, text)
@@ -364,7 +364,7 @@ def _fit(args) -> int:
     for warning in result.warnings:
         print(f"{args.prog}: warning: {warning}", file=sys.stderr)
     if args.json:
-        print(json.dumps(summary, allow_nan=False))
+        print(json.dumps(as_json, allow_nan=False))
     else:
         print(f"fitted {args.photo} ({result.method}, {result.profile_model} profile, {result.n_pixels} pixels, "
               f"{result.steps} steps, {seconds:.1f} s, chi2/dof {result.chi2_reduced:.2f})")

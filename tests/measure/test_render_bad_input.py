@@ -200,3 +200,28 @@ def test_a_mesh_or_map_outside_the_scenes_folder_is_read_only_when_allowed(tmp_p
     render_command.main([str(scene), "-o", str(out), "-q", "--method", "lambert", "--allow-outside-paths"])
     err = capsys.readouterr().err
     assert "outside the scene's folder" not in err  # read; whatever the frame of one triangle gives
+
+
+def test_an_unconstrained_fit_prints_inf_in_the_table_and_null_in_the_json(tmp_path, capsys):
+    """Lambert has no spread, so a fit through it leaves the mean free path unconstrained: infinite errors.
+    The table says "+- inf" and the JSON null (it had printed Infinity, invalid JSON; and a
+    JSON-safe copy must not reach the table, whose format needs numbers)."""
+    import json
+
+    scene = tmp_path / "s.toml"
+    scene.write_text('[geometry]\nshape = "sphere"\nradius = 20.0\n[material]\nname = "marble"\n'
+                     '[[lights]]\ntype = "environment"\n'
+                     '[camera]\nposition = [0.0, -110.0, 30.0]\nfov = 28\nresolution = [32, 24]\n')
+    assert render_command.main([str(scene), "-o", str(tmp_path / "photo.png"), "-q"]) == 0
+    photo = str(tmp_path / "photo.exr")
+    assert render_command.main(["fit", str(scene), photo, "-o", str(tmp_path / "a"), "--no-gain", "-q",
+                                "--method", "lambert"]) == 0
+    out = capsys.readouterr().out
+    assert "mean free path [mm]" in out and "+- inf" in out
+    assert render_command.main(["fit", str(scene), photo, "-o", str(tmp_path / "b"), "--no-gain", "-q",
+                                "--method", "lambert",
+                                "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert None in summary["mean_free_path_err_mm"]
+    assert json.loads((tmp_path / "b" / "photo.fit.json").read_text())["mean_free_path_err_mm"] == \
+        summary["mean_free_path_err_mm"]
