@@ -51,6 +51,7 @@ from above).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -107,23 +108,21 @@ class Environment:
         """A uniform environment of radiance ``color * intensity`` (a white furnace at 1)."""
         return cls(np.ones((2, 4, 3)), tuple(float(c) for c in color), float(intensity), 0.0, "constant")
 
-    @property
-    def is_constant(self) -> bool:
-        return self.source == "constant"
-
     def incoming_power(self, view) -> tuple[float, float]:
         r"""(from beyond, total): :math:`\int L\,d\omega` over the directions light arrives from
         that lie beyond the object seen along ``view`` (the camera's axis, (3,)), and over all,
         times intensity and mean colour: what lights a small convex object from behind."""
-        small = self.table_map().mean(-1)
+        small = self.table_map.mean(-1)
         directions, solid = map_directions(small.shape, self.rotation)
         power = small * solid * self.intensity * float(np.mean(self.color))
         beyond = directions @ (np.asarray(view, float) / np.linalg.norm(view)) > 0
         return float(power[beyond].sum()), float(power.sum())
 
+    @functools.cached_property
     def table_map(self) -> np.ndarray:
         """The map box-filtered to at most ``TABLE_MAP`` (power kept: each block's mean radiance
-        weighted by its rows' solid angles), (h, w, 3)."""
+        weighted by its rows' solid angles), (h, w, 3); computed once (the tables, the planner
+        and the visibility weights all read it)."""
         return downsample(np.asarray(self.radiance, float), TABLE_MAP)
 
 
@@ -131,14 +130,12 @@ def map_directions(shape, rotation: float = 0.0):
     """Unit directions (H, W, 3) of a latitude-longitude map's pixel centres and their solid
     angles (H, W) [sr], exact per row: :math:`\\Delta\\phi\\,(\\cos\\theta_{top} - \\cos\\theta_{bottom})`."""
     rows, cols = shape
-    theta_edges = np.linspace(0.0, np.pi, rows + 1)
-    theta = 0.5 * (theta_edges[:-1] + theta_edges[1:])
+    theta = (np.arange(rows) + 0.5) * np.pi / rows
     u = (np.arange(cols) + 0.5) / cols
     phi = 2 * np.pi * (0.5 - u) + np.radians(rotation)
     sin_t = np.sin(theta)[:, None]
     directions = np.stack(np.broadcast_arrays(sin_t * np.cos(phi), sin_t * np.sin(phi), np.cos(theta)[:, None]), -1)
-    solid = (2 * np.pi / cols) * (np.cos(theta_edges[:-1]) - np.cos(theta_edges[1:]))
-    return directions, np.broadcast_to(solid[:, None], (rows, cols))
+    return directions, np.broadcast_to(row_solid_angles(rows, cols)[:, None], (rows, cols))
 
 
 def row_solid_angles(rows: int, cols: int) -> np.ndarray:
@@ -210,7 +207,7 @@ def irradiance_table(env: Environment) -> np.ndarray:
     cross-correlation along the columns, done by FFT, one normal row at a time (0.7 s; a dense
     sum over every pair of normal and map pixel took 4-5 times longer at a quarter of the grid;
     measured 2026-12-04)."""
-    small = env.table_map()
+    small = env.table_map
     rows, cols = small.shape[:2]
     normal_rows = NORMAL_GRID[0]
     directions, solid = map_directions((rows, cols))  # the map's own frame: normals are turned at look-up
@@ -311,7 +308,7 @@ def environment_shadows(env: Environment, maps: tuple | None = None) -> Environm
     :func:`fibonacci_directions` (``VISIBILITY_DIRECTIONS``), built by
     :func:`jsss.render.lighting.shadow_map`), or None where nothing shadows."""
     directions = None if maps is None else fibonacci_directions(len(maps))
-    return EnvironmentShadows(irradiance_table(env), env.table_map(), float(env.rotation), directions, maps)
+    return EnvironmentShadows(irradiance_table(env), env.table_map, float(env.rotation), directions, maps)
 
 
 def environment_geometry(normals, valid, shadows: EnvironmentShadows, seen=None) -> EnvironmentGeometry:

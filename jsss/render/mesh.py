@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MESH_FILES", "Mesh", "box", "distance_to_rim", "distance_to_surface", "fin", "is_closed", "load_mesh",
-           "load_obj", "plane", "uv_sphere", "weld"]
+__all__ = ["MESH_FILES", "MM_PER_UNIT", "Mesh", "box", "distance_to_rim", "distance_to_surface", "fin", "is_closed",
+           "load_mesh", "load_obj", "plane", "uv_sphere", "weld"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -189,9 +189,9 @@ def shadows_itself(mesh: Mesh) -> bool:
     surfaces (a plane, lit from above) see their whole upper hemisphere."""
     from scipy.spatial import ConvexHull
 
-    if not is_closed(mesh):
-        return False
     surface = _welded_surface(mesh)
+    if not surface.is_watertight:  # open (is_closed, without welding twice)
+        return False
     try:
         hull = ConvexHull(np.asarray(surface.vertices, float)).volume
     except Exception:  # a flat or degenerate point set (Qhull refuses it): nothing to hide behind
@@ -297,7 +297,8 @@ def fin(height: float = 30.0, radius: float = 40.0, thickness: float = 2.0, *, a
     return Mesh(v, nn, t, _outward(v, nn, f), name=f"fin(t={thickness:g})")
 
 
-MESH_FILES = {".obj": 1.0, ".gltf": 1000.0, ".glb": 1000.0}  # suffix: mm per unit of the file (glTF 2.0 is in metres)
+MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}  # the units a mesh file may be in
+MESH_FILES = {".obj": "mm", ".gltf": "m", ".glb": "m"}  # suffix: the file's units unless a scene says (glTF 2.0: metres)
 
 
 def load_obj(path) -> Mesh:
@@ -309,7 +310,8 @@ def load_mesh(path) -> tuple[Mesh, np.ndarray | None]:
     """Read a triangle mesh, its texture coordinates and its base-colour texture from a
     Wavefront OBJ (+ MTL) or a glTF 2.0 file (.gltf, .glb), via trimesh.
 
-    Returns the mesh in the file's own units (:data:`MESH_FILES` says what they are in mm) and
+    Returns the mesh in the file's own units (:data:`MESH_FILES` names them, :data:`MM_PER_UNIT`
+    converts) and
     the base-colour texture as linear RGB (H, W, 3) in texel order (the image's bottom row
     first, as :func:`jsss.render.surface_maps.read_map` reads a map), times the material's
     base-colour factor; None where the file has no texture or no UVs. A file without UVs

@@ -204,7 +204,6 @@ class _Table:
 
 _SECTIONS = ("geometry", "material", "lights", "camera", "render")
 _SHAPES = ("sphere", "plane", "box", "fin", "mesh", "obj")  # obj: the older name of mesh
-UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}  # [geometry] units of a mesh file
 
 
 def _segments(t: _Table, key: str, default: int, triangles) -> int:
@@ -256,8 +255,8 @@ def _geometry(t: _Table, base_dir: Path, allow_outside: bool = False) -> tuple[_
                           segments=_segments(t, "segments", 32, lambda n: 8 * n * n))
         else:
             obj = _inside(t, "path", Path(t.string("path")), base_dir, allow_outside)
-            default = _mesh.MESH_FILES.get(obj.suffix.lower(), 1.0)
-            unit = UNITS_MM[t.string("units", tuple(UNITS_MM), next(k for k, v in UNITS_MM.items() if v == default))]
+            units = t.string("units", tuple(_mesh.MM_PER_UNIT), _mesh.MESH_FILES.get(obj.suffix.lower(), "mm"))
+            unit = _mesh.MM_PER_UNIT[units]
             m, base_colour = _mesh.load_mesh(obj)
             textures = t.raw("textures", True)
             if not isinstance(textures, bool):
