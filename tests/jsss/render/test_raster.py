@@ -82,3 +82,24 @@ def test_silhouette_pixels_follow_a_supersampled_render(method):
     error = np.abs(radiance - truth)[partial].mean() / scale
     stepped = np.abs(centre_sampled - truth)[partial].mean() / scale
     assert error < 0.5 * stepped, (error, stepped)
+
+
+def test_face_chunks_hold_at_most_the_candidate_budget_and_cover_every_face_once():
+    """raster._chunks (bisection on the running total) against the rule it replaced, a loop that
+    closes a run before the face that would overflow it (a face over budget goes alone)."""
+    from jsss.render import raster
+
+    def by_loop(counts):
+        start, total, out = 0, 0, []
+        for i, c in enumerate(counts):
+            if total + c > raster._MAX_CANDIDATES and i > start:
+                out.append((start, i))
+                start, total = i, 0
+            total += c
+        return out + ([(start, len(counts))] if start < len(counts) else [])
+
+    rng = np.random.default_rng(3)
+    budget = raster._MAX_CANDIDATES
+    for counts in (rng.integers(0, budget // 50, 2000), rng.integers(0, 3 * budget, 40), np.zeros(5, int),
+                   np.array([budget, budget, 0, 1]), np.array([], int)):
+        assert list(raster._chunks(counts)) == by_loop(counts)
