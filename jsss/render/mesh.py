@@ -112,6 +112,17 @@ def weld(mesh: Mesh, *, tolerance: float = 1e-9):
     return mesh.vertices[first], index, faces[keep]  # collapsed triangles (at poles) dropped
 
 
+def _welded_normals(mesh: Mesh) -> np.ndarray:
+    """Area-weighted vertex normals of the welded surface, given back to every copy of a vertex
+    (an OBJ splits a vertex wherever its texture coordinates jump)."""
+    import trimesh
+
+    with np.errstate(all="ignore"):  # a degenerate mesh (no extent) is refused by the scene, with its reason
+        positions, index, faces = weld(mesh)
+        welded = np.asarray(trimesh.Trimesh(positions, faces, process=False).vertex_normals)
+    return welded[index]
+
+
 def _welded_surface(mesh: Mesh):
     """The welded surface as a ``trimesh.Trimesh`` (``process=False``: kept as welded)."""
     import trimesh
@@ -330,7 +341,7 @@ def load_mesh(path) -> tuple[Mesh, np.ndarray | None]:
         raise ValueError(f"{path}: no such mesh file.")
     if path.suffix.lower() not in MESH_FILES:
         raise ValueError(f"{path}: a mesh must be {', '.join(MESH_FILES)}; got {path.suffix or 'no suffix'}.")
-    _check_textures_exist(path)
+    named = _check_textures_exist(path)
     try:
         loaded = trimesh.load(path, process=False, force="mesh")
     except Exception as error:  # trimesh raises many types for a bad file
@@ -349,10 +360,15 @@ def load_mesh(path) -> tuple[Mesh, np.ndarray | None]:
                          "NaN or infinite.")
     if np.abs(vertices).max(initial=0.0) > 1e30:
         raise ValueError(f"{path}: vertex coordinates must lie within 1e30 (largest {np.abs(vertices).max():.3g}).")
+    supplied_normals = "vertex_normals" in loaded._cache  # the file's own (vn, NORMAL): hard edges kept
     with np.errstate(all="ignore"):  # trimesh's normals of a degenerate mesh: checked where it matters
         normals = np.asarray(loaded.vertex_normals)
     mesh = Mesh(vertices, normals, uv, np.asarray(loaded.faces), name=path.stem, has_uvs=has_uvs)
-    return mesh, (_base_colour(loaded.visual) if has_uvs else None)
+    if not supplied_normals:  # computed: from the welded surface, or each UV seam shades as a crease
+        mesh = Mesh(vertices, _welded_normals(mesh), uv, mesh.faces, name=path.stem, has_uvs=has_uvs)
+    # An OBJ that names no map_Kd has none: trimesh still offers a 2 x 2 image of its default grey.
+    named_texture = path.suffix.lower() != ".obj" or bool(named)
+    return mesh, (_base_colour(loaded.visual) if has_uvs and named_texture else None)
 
 
 def _base_colour(visual) -> np.ndarray | None:
@@ -373,9 +389,9 @@ def _base_colour(visual) -> np.ndarray | None:
     return np.ascontiguousarray(rgb[::-1])
 
 
-def _check_textures_exist(path: Path) -> None:
+def _check_textures_exist(path: Path) -> list[str]:
     """A texture the file names that is not there is an error naming both (trimesh would load
-    the mesh without it, and the object would render white)."""
+    the mesh without it, and the object would render white). Returns the names it checked."""
     import json
 
     names = []
@@ -401,3 +417,4 @@ def _check_textures_exist(path: Path) -> None:
     for name in names:
         if not (path.parent / name).is_file():
             raise ValueError(f"{path}: the texture or buffer {name} it names is missing (beside the file).")
+    return names
