@@ -13,6 +13,12 @@ profile (:func:`choose_variances`), not assumed.
 from __future__ import annotations
 
 import collections
+import functools
+import hashlib
+import os
+import tempfile
+import warnings
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -25,7 +31,8 @@ from ..gaussians import GaussianSum, empirical_dipole_fit, evaluate, layers_as_g
 from ..numerics import is_concrete
 from .scene import Material
 
-__all__ = ["choose_variances", "exact_profile", "full_profile", "reduction_error", "render_profile", "shared_variances"]
+__all__ = ["choose_variances", "exact_profile", "full_profile", "keep_profiles_in", "reduction_error", "render_profile",
+           "shared_variances"]
 
 
 def full_profile(material: Material, medium=None) -> GaussianSum:
@@ -41,32 +48,94 @@ def full_profile(material: Material, medium=None) -> GaussianSum:
     return GaussianSum(gs.weights.reshape(gs.weights.shape[0], -1), gs.variances)
 
 
-_LAYERED_KEPT = 8  # stacks remembered by _layered_profile
+_LAYERED_KEPT = 8  # stacks remembered by _remembered, per kind
 _layered_profiles: collections.OrderedDict = collections.OrderedDict()
+# Where stacks' profiles are also kept on disk: None (the library's default) keeps them in memory
+# only; console scripts name a folder with keep_profiles_in.
+_profiles_dir: Path | None = None
+
+
+def keep_profiles_in(folder) -> None:
+    """Keep layered stacks' profiles under ``folder/profiles/`` from now on (console scripts; None:
+    memory only). A skin preset's profile is 7-10 s of multipole fits, Hankel matrices and
+    polynomial products on a 2-core CPU; read back, a few milliseconds."""
+    global _profiles_dir
+    _profiles_dir = None if folder is None else Path(folder)
+
+
+@functools.lru_cache(maxsize=1)
+def _code_digest() -> str:
+    """A digest of the code the kept profiles come from (jsss.layers, jsss.gaussians, this
+    module): a change to any of it makes every file kept before it a miss, not a stale answer."""
+    from .. import gaussians, layers
+
+    digest = hashlib.sha256()
+    for package in (layers, gaussians):
+        for source in sorted(Path(package.__file__).parent.glob("*.py")):
+            digest.update(source.read_bytes())
+    digest.update(Path(__file__).read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _remembered(kind: str, stack, extra: tuple, compute, build=lambda *arrays: arrays):
+    """``build(*compute())`` (``compute`` returns a tuple of arrays) for a stack's numbers, one
+    object per stack: kept for the process (the last
+    ``_LAYERED_KEPT``) and, where :func:`keep_profiles_in` named a folder, on disk as
+    ``profiles/<kind>-<digest>.npz``, written atomically (an unreadable file is recomputed and
+    replaced). Traced stacks (under jit or grad) are never kept."""
+    if not is_concrete(stack):
+        return build(*compute())
+    leaves, treedef = jax.tree_util.tree_flatten(stack)
+    arrays = [np.asarray(leaf) for leaf in leaves] + [np.asarray(a) for a in extra]
+    key = (kind, str(treedef), jax.config.jax_enable_x64, tuple((a.dtype.str, a.shape, a.tobytes()) for a in arrays))
+    if key in _layered_profiles:
+        _layered_profiles.move_to_end(key)
+        return _layered_profiles[key]
+    path = None
+    if _profiles_dir is not None:
+        name = hashlib.sha256(repr(key).encode() + _code_digest().encode()).hexdigest()[:32]
+        path = _profiles_dir / "profiles" / f"{kind}-{name}.npz"
+    value = None
+    if path is not None and path.is_file():
+        try:
+            with np.load(path) as kept:
+                value = tuple(kept[f"a{i}"] for i in range(len(kept.files)))
+        except (OSError, ValueError, KeyError, EOFError) as error:
+            warnings.warn(f"{path}: unreadable kept profile ({error}); computing it again", stacklevel=3)
+    if value is None:
+        value = tuple(np.asarray(a) for a in compute())
+        if path is not None:
+            _write_atomically(path, value)
+    _layered_profiles[key] = value = build(*value)
+    while len(_layered_profiles) > _LAYERED_KEPT:
+        _layered_profiles.popitem(last=False)
+    return value
+
+
+def _write_atomically(path: Path, arrays: tuple) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as handle:
+            np.savez(handle, **{f"a{i}": a for i, a in enumerate(arrays)})
+        os.replace(handle.name, path)
+    except OSError as error:
+        warnings.warn(f"{path}: cannot keep the profile there ({error})", stacklevel=4)
 
 
 def _layered_profile(material: Material) -> GaussianSum:
-    """The stack's Kubelka-Munk profile, remembered by the stack's numbers.
+    """The stack's Kubelka-Munk profile, remembered by the stack's numbers (:func:`_remembered`).
 
     Planning asks for it three times (the frame's features, the variances, the render's
     weights), and each is 2-3 s of multipole fits and polynomial products on a CPU; the
-    stack does not change between them. Traced stacks (under jit or grad) are never kept.
+    stack does not change between them.
     """
     stack = (tuple(material.layers), material.base)
-    if not is_concrete(stack):
-        R, _ = layers_as_gaussians(list(material.layers), material.base)
-        return to_gaussian_sum(R)
-    leaves, treedef = jax.tree_util.tree_flatten(stack)
-    arrays = [np.asarray(leaf) for leaf in leaves]
-    key = (str(treedef), jax.config.jax_enable_x64,
-           tuple((a.dtype.str, a.shape, a.tobytes()) for a in arrays))
-    if key not in _layered_profiles:
-        R, _ = layers_as_gaussians(list(material.layers), material.base)
-        _layered_profiles[key] = to_gaussian_sum(R)
-        while len(_layered_profiles) > _LAYERED_KEPT:
-            _layered_profiles.popitem(last=False)
-    _layered_profiles.move_to_end(key)
-    return _layered_profiles[key]
+
+    def compute():
+        gs = to_gaussian_sum(layers_as_gaussians(list(material.layers), material.base)[0])
+        return gs.weights, gs.variances
+
+    return _remembered("sum", stack, (), compute, GaussianSum)
 
 
 def exact_profile(material: Material, r) -> np.ndarray:
@@ -120,8 +189,12 @@ def _reference(material: Material, r, medium=None):
     # The stack's own total (its spectrum at k = 0), not a quadrature of R(r) over the fit's
     # radii: a weakly absorbing stack has a 1/r^3 tail, and cutting it at the widest
     # Gaussian's 8 sigma lost 1-2 % of a non-absorbing stack's light (the furnace test).
-    stacked = _layers.stack(list(material.layers), material.base, r=r)
-    return jnp.asarray(stacked.R, r.dtype), jnp.asarray(stacked.R_total, r.dtype)
+    def compute():
+        stacked = _layers.stack(list(material.layers), material.base, r=r)
+        return stacked.R, stacked.R_total
+
+    profile, total = _remembered("stack", (tuple(material.layers), material.base), (r,), compute)
+    return jnp.asarray(profile, r.dtype), jnp.asarray(total, r.dtype)
 
 
 def _fit_weights(variances, r, profile, total, xp=jnp):

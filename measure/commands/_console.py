@@ -68,11 +68,12 @@ def compilation_cache_dir() -> Path | None:
 
 def enable_caches(*, spectra: bool = False) -> Path | None:
     """Turn on JAX's persistent compilation cache and the store of traced programs at
-    :func:`compilation_cache_dir`, and with ``spectra`` keep the renderer's Laplacian spectra in
-    :func:`cache_dir` (importing the renderer costs 0.3 s, so commands that do not render leave
+    :func:`compilation_cache_dir`, and with ``spectra`` keep the renderer's Laplacian spectra,
+    layered profiles and environment visibility maps in :func:`cache_dir` (importing the renderer costs 0.3 s, so commands that do not render leave
     it off).
 
-    Programs that took over half a second to compile are kept. An unwritable folder gives a
+    Every program is kept, however quick to compile: the head example compiles 233 programs of
+    about 25 ms each, 5.7 s of every run when only those over half a second were kept. An unwritable folder gives a
     warning and no cache (the command still runs). Returns the folder, or None.
     """
     import jax
@@ -80,9 +81,13 @@ def enable_caches(*, spectra: bool = False) -> Path | None:
     from fitting.programs import keep_programs_in
 
     if spectra:
+        from jsss.render.lighting import keep_visibility_maps_in
         from jsss.render.normal_filter import keep_spectra_in
+        from jsss.render.profiles import keep_profiles_in
 
         keep_spectra_in(cache_dir())
+        keep_profiles_in(cache_dir())
+        keep_visibility_maps_in(cache_dir())
     path = compilation_cache_dir()
     if path is None:
         return None
@@ -93,7 +98,7 @@ def enable_caches(*, spectra: bool = False) -> Path | None:
                       "or JSSS_CACHE_DIR to a writable directory", stacklevel=2)
         return None
     jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     keep_programs_in(path)  # JAX's cache reads only its own *-cache files there
     return path
 
@@ -111,9 +116,13 @@ def start(*, spectra: bool = False) -> None:
     Laplacian spectra on disk."""
     _start_once()
     if spectra:
+        from jsss.render.lighting import keep_visibility_maps_in
         from jsss.render.normal_filter import keep_spectra_in
+        from jsss.render.profiles import keep_profiles_in
 
         keep_spectra_in(cache_dir())
+        keep_profiles_in(cache_dir())
+        keep_visibility_maps_in(cache_dir())
 
 
 @functools.lru_cache(maxsize=1)

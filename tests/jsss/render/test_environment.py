@@ -239,3 +239,25 @@ def test_a_marble_sphere_under_the_studio_map_matches_mitsuba(tmp_path):
     ours = np.asarray(render(scene, plan_scene(scene, method="texture-space"), dtype=jnp.float64).radiance)
     inner = _interior(camera_buffers(scene.mesh, scene.camera).mask)
     np.testing.assert_allclose(ours[inner].sum(0) / truth[inner].sum(0), 1.0, atol=0.05)
+
+
+def test_visibility_maps_are_kept_per_mesh_and_read_back_equal(tmp_path, monkeypatch):
+    """keep_visibility_maps_in (the console scripts): the maps of a mesh are written once, and a
+    new process reads back the same depths and masks (so the same visibility)."""
+    from jsss.render import lighting
+
+    mesh = _step_mesh()
+    monkeypatch.setattr(lighting, "_visibility_in_memory", {})
+    lighting.keep_visibility_maps_in(tmp_path)
+    try:
+        computed = lighting.visibility_maps(mesh)
+        assert len(list((tmp_path / "visibility").glob(f"{mesh.digest()}-*.npz"))) == 1
+        lighting._visibility_in_memory.clear()
+        read = lighting.visibility_maps(mesh)
+    finally:
+        lighting.keep_visibility_maps_in(None)
+    assert len(read) == len(computed) == env_module.VISIBILITY_DIRECTIONS
+    for a, b in zip(read, computed):
+        np.testing.assert_array_equal(a.depth, b.depth)
+        np.testing.assert_array_equal(a.mask, b.mask)
+        assert a.view == b.view

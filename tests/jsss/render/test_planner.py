@@ -336,3 +336,35 @@ def test_a_scene_in_metres_is_told_that_lengths_are_millimetres(recwarn):
     with warnings.catch_warnings():
         warnings.simplefilter("error", ScaleWarning)
         plan_scene(scene(20.0, 110.0), method="lambert")
+
+
+def test_a_kept_layered_profile_is_read_back_from_disk_and_a_damaged_file_is_recomputed(tmp_path, monkeypatch):
+    """keep_profiles_in (what the console scripts call): a new process reads the stack's profile
+    and its reference from the folder, equal to the computed ones; a damaged file warns and is
+    replaced; without a folder nothing is written."""
+    from jsss.render import profiles
+    from jsss.render.profiles import full_profile, keep_profiles_in
+
+    material = parse_scene(scene_dict(material={"preset": "skin"})).material
+    monkeypatch.setattr(profiles, "_layered_profiles", type(profiles._layered_profiles)())
+    keep_profiles_in(tmp_path)
+    try:
+        computed = full_profile(material)
+        files = sorted((tmp_path / "profiles").glob("sum-*.npz"))
+        assert len(files) == 1
+        profiles._layered_profiles.clear()  # a new process: memory empty, the folder kept
+        read = full_profile(material)
+        np.testing.assert_array_equal(read.weights, computed.weights)
+        np.testing.assert_array_equal(read.variances, computed.variances)
+        files[0].write_bytes(b"not an npz")
+        profiles._layered_profiles.clear()
+        with pytest.warns(UserWarning, match="unreadable kept profile"):
+            again = full_profile(material)
+        np.testing.assert_array_equal(again.weights, computed.weights)
+        assert np.load(files[0])["a0"].shape == np.shape(computed.weights)  # replaced
+    finally:
+        keep_profiles_in(None)
+    profiles._layered_profiles.clear()
+    before = sorted(tmp_path.rglob("*"))
+    full_profile(material)
+    assert sorted(tmp_path.rglob("*")) == before
