@@ -37,6 +37,7 @@ A scene file (lengths in mm, coefficients in 1/mm)::
     [render]
     accuracy = 0.05           # target relative error of the subsurface light
     texture_size = 512        # the largest texture the planner may choose
+    method = "auto"           # or lambert | normal filtering | image-space | texture-space: fixes it
 
 Every problem is reported as ``file: [table] key: what is wrong`` (:class:`SceneError`).
 """
@@ -61,6 +62,7 @@ from . import mesh as _mesh
 from .artist_maps import coefficients_from_artist_maps
 from .environment import Environment
 from .lighting import Light
+from .passes import Method
 from .raster import PerspectiveView
 from .surface_maps import (
     ARTIST_KEYS,
@@ -123,6 +125,7 @@ class Scene:
     shadow_map_size: int = 512
     exposure: float | None = None
     source: str = "<scene>"
+    method: str | None = None  # [render] method: the scene fixes it; None lets the planner choose
     extras: dict = field(default_factory=dict)
 
 
@@ -574,9 +577,16 @@ def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".", allow_outs
     if problem:
         r.fail("shadow_map_size", problem)
     exposure = r.number("exposure", None, positive=True)
+    method = r.string("method", None, "auto")
+    if method != "auto":
+        try:
+            method = Method(method).value
+        except ValueError:
+            r.fail("method", f"must be auto, {', '.join(m.value for m in Method)}; got {method!r}.")
     r.check_unknown()
     root.check_unknown()
-    return Scene(mesh, material, lights, camera, accuracy, texture_size, shadow, exposure, source)
+    return Scene(mesh, material, lights, camera, accuracy, texture_size, shadow, exposure, source,
+                 method=None if method == "auto" else method)
 
 
 def load_scene(path, *, allow_outside: bool = False) -> Scene:

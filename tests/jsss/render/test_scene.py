@@ -49,7 +49,7 @@ def test_unreadable_toml_names_the_file(tmp_path):
 
 
 def test_example_scenes_load():
-    for name in ("marble_sphere", "skin_backlit", "ketchup_plane", "marble_veins", "checker_plane"):
+    for name in ("marble_sphere", "skin_backlit", "ketchup_plane", "marble_veins", "checker_plane", "skin_studio", "head"):
         scene = load_scene(os.path.join(ROOT, "examples", f"{name}.toml"))
         assert scene.lights and scene.camera.width > 0
 
@@ -176,3 +176,19 @@ def test_command_line_renders_several_scenes_and_reports_the_bad_one(tmp_path):
     assert sorted(p.name for p in (tmp_path / "renders").iterdir()) == ["a.png", "b.png"]
     errors = [line for line in out.stderr.splitlines() if "error" in line]
     assert len(errors) == 1 and "bad.toml: [scene] materail: unknown section" in errors[0]
+
+
+def test_the_scene_may_fix_the_method_and_the_plan_says_so():
+    """[render] method is obeyed (any spelling the command line takes), a caller's method still
+    wins, and "auto" or no key leaves the choice to the planner."""
+    from jsss.render import plan_scene
+
+    data = scene_dict(render={"texture_size": 64, "accuracy": 0.1, "method": "normal-filtering"})
+    plan = plan_scene(parse_scene(data))
+    assert plan.method == "normal filtering" and plan.method_why == "set by the scene ([render] method)"
+    assert plan_scene(parse_scene(data), method="lambert").method == "lambert"
+    data["render"]["method"] = "auto"
+    assert parse_scene(data).method is None
+    data["render"]["method"] = "fast"
+    with pytest.raises(SceneError, match=r"\[render\] method: must be auto, lambert, .*got 'fast'"):
+        parse_scene(data, source="s.toml")
