@@ -26,8 +26,9 @@ accuracy target:
   0.2 % of the analytic Gaussian, the quadrupling one 13-19 % (tests, benchmark);
 * **stretch correction** -- off when the UV map's stretch varies by less than 10 %;
 * **translucent shadow maps** -- off when no light crosses between opposite faces (normals
-  more than 120 degrees apart), or when the thinnest such part passes
-  less than a tenth of the target of the profile's light (:math:`e^{-d^2/2v}` weighting);
+  more than 120 degrees apart), or when the thinnest such part (the thickness under which
+  25 mm^2 of surface lies) passes less than a tenth of the target of the profile's light
+  (:math:`e^{-d^2/2v}` weighting);
 * **single scattering** -- Jensen's first-bounce term with its own angular law, for a
   homogeneous medium whose single-scattered light is at least a quarter of the target of the
   light leaving (:func:`single_scattering_share`); it takes that share from the diffusion
@@ -533,8 +534,8 @@ def _tsm_decision(scene: Scene, variances, weights, target):
         if through.any():
             # The thickness under which THIN_PART_AREA of such surface lies: a part the size of an
             # ear lobe counts however large the rest of the shadowed side (a percentile of the
-            # texels did not: a head's ears are 0.2 % of what its far side holds, and their
-            # glow, +120 % in red, went unplanned).
+            # texels did not: the head's ears are 0.1 % of what its far side holds under the
+            # example's rim light, and their glow, up to +82 % in red, went unplanned).
             order = np.argsort(g.thickness[through])
             area = np.cumsum(texels.area[through][order])
             k = min(int(np.searchsorted(area, THIN_PART_AREA)), len(order) - 1)
