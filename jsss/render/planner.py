@@ -508,7 +508,7 @@ def _maps_decision(material, basis, method):
     return True, why
 
 
-TSM_TEXELS = 128        # texels per side the translucent-shadow-map decision looks at (its map: 4x finer)
+TSM_TEXELS = 64         # texels per side the translucent-shadow-map decision looks at (its map: 4x finer)
 THIN_PART_AREA = 25.0  # mm^2 of surface that must lie behind a thin part for it to count
 
 
