@@ -8,7 +8,10 @@
 
 The measurement itself is :mod:`measure.files` (read and check the files, fit them); this
 module is the command line around it. Bad input gives a one-line error and exit status 2,
-never a traceback.
+never a traceback. A channel whose fit is poor (chi2/dof above 100: residuals ten times its
+noise, :data:`measure.checks.NOT_A_RESULT_CHI2`) is not a result: its place in the table, the JSON and a
+batch row is empty, its numbers go under ``estimate``, and the command exits 1 unless
+``--accept-poor`` is given.
 """
 
 from __future__ import annotations
@@ -61,6 +64,9 @@ def _fit_options(parser):
                              "pixels record radiance toward it")
     parser.add_argument("--exitance", action="store_true",
                         help="read pixels as exitance (a simulation's tally of light leaving), not a camera's radiance")
+    parser.add_argument("--accept-poor", action="store_true",
+                        help="exit 0 even where a channel's fit is poor (chi2/dof above 100); its values "
+                             "stay out of the result's place either way, in 'estimate'")
 
 
 def _single_options() -> argparse.ArgumentParser:
@@ -130,7 +136,7 @@ def _batch_parser(commands):
     batch.add_argument("--scheduler", metavar="ADDRESS",
                        help="fit on an existing dask.distributed cluster (e.g. tcp://host:8786) instead")
     batch.add_argument("--resume", action="store_true",
-                       help="keep the rows of --out that are already fitted (status ok) and fit only the rest")
+                       help="keep the rows of --out that are already fitted (status ok or poor) and fit only the rest")
     batch.add_argument("-q", "--quiet", action="store_true", help="no progress bar (on stderr, also when it is a file)")
     batch.add_argument("--version", action="version", version=version(f"{PROG} batch"))
     batch.set_defaults(run=_batch)
@@ -181,8 +187,7 @@ def _fit(args) -> int:
     result = fit_model(args.model)
     _refuse_failed(result, f"{args.measurement[0]}: ")
     comparison = _dipole_bias(result, lambda: fit_model("transport")) if args.model == "dipole" else None
-    _report(result, args, extra=comparison, stem=Path(args.measurement[0]).stem)
-    return 0
+    return _report(result, args, extra=comparison, stem=Path(args.measurement[0]).stem)
 
 
 LIKELY_CAUSES = ("check --pixel-mm (or the EXR's pixel size), --eta, --reference-reflectance and that the "
@@ -232,8 +237,7 @@ def _demo(args, say) -> int:
         say(f"fitting {args.model} (the first fit compiles: 10-20 s)")
         fit = _read_and_fit(paths["measurement"], paths["reference"], dark=paths.get("dark"))
         result = fit(1.5, model=args.model, g=args.g, view_angle_deg=_view_angle(args))
-    _report(result, args, truth=synthetic.truth, stem="marble")
-    return 0
+    return _report(result, args, truth=synthetic.truth, stem="marble")
 
 
 def _dipole_bias(result, fit_transport):
@@ -261,10 +265,35 @@ def _dipole_bias(result, fit_transport):
     return {"dipole_minus_transport": out}
 
 
+# What a poor channel's result leaves empty (null in JSON, blank in a batch row); the numbers
+# move to "estimate" (issue 37: ketchup's red came out -80 % with chi2/dof 6260, printed in the
+# table like a measurement).
+RESULT_KEYS = ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance", "mean_free_path_mm")
+
+
+def with_status(table: dict) -> dict:
+    """The table with ``status`` per channel (``poor`` where chi2/dof is not finite or above
+    :data:`measure.checks.NOT_A_RESULT_CHI2`, else ``ok``) and, where a channel is poor, its values
+    out of the result's place: ``None`` there, and every channel's numbers kept under ``estimate``."""
+    from measure.checks import NOT_A_RESULT_CHI2
+
+    status = ["ok" if math.isfinite(chi2) and chi2 <= NOT_A_RESULT_CHI2 else "poor" for chi2 in table["chi2_reduced"]]
+    out = {**table, "status": status}
+    if "poor" in status:
+        out["estimate"] = {key: list(table[key]) for key in RESULT_KEYS}
+        for key in RESULT_KEYS:
+            out[key] = [None if s == "poor" else v for v, s in zip(table[key], status)]
+    return out
+
+
 def _format_table(table) -> str:
     lines = [f"{'channel':<8} {'sigma_a [1/mm]':>22} {'sigma_s_prime [1/mm]':>22} {'total R_d':>10} "
              f"{'mfp [mm]':>9} {'rel. resid.':>11}"]
     for i, ch in enumerate(table["channels"]):
+        if table.get("status", ["ok"] * (i + 1))[i] == "poor":
+            chi2 = f"poor fit, chi2/dof {table['chi2_reduced'][i]:.3g}: not a measurement"
+            lines.append(f"{ch:<8} {chi2:>45} {'-':>10} {'-':>9} {table['rel_residual'][i]:>11.2e}")
+            continue
         sa = f"{table['sigma_a'][i]:.5g} +- {table['sigma_a_err'][i]:.2g}"
         ss = f"{table['sigma_s_prime'][i]:.5g} +- {table['sigma_s_prime_err'][i]:.2g}"
         lines.append(f"{ch:<8} {sa:>22} {ss:>22} {table['total_reflectance'][i]:>10.4f} "
@@ -326,8 +355,12 @@ def _write_exports(result, args, stem) -> list[str]:
     return said
 
 
-def _report(result, args, truth=None, extra=None, stem="fitted"):
-    table = {**result.table(), **(extra or {})}
+def _report(result, args, truth=None, extra=None, stem="fitted") -> int:
+    """Print the result (table or JSON), write the plot and the exports; returns the exit status:
+    1 where a channel's fit is poor and ``--accept-poor`` was not given, else 0."""
+    raw = {**result.table(), **(extra or {})}
+    table = with_status(raw)
+    poor = [ch for ch, s in zip(table["channels"], table["status"]) if s == "poor"]
     for channel, quality in zip(table["channels"], table["quality"]):
         if quality != "ok":  # a residual far beyond its noise model
             print(f"{PROG}: warning: channel {channel}: {quality}", file=sys.stderr)
@@ -335,24 +368,35 @@ def _report(result, args, truth=None, extra=None, stem="fitted"):
         print(f"{PROG}: warning: {message}", file=sys.stderr)
     if args.plot:
         _plot(result, args.plot)
-    for line in _write_exports(result, args, stem):
-        print(line, file=sys.stderr if args.json else sys.stdout)
+    if poor and not args.accept_poor and (args.export or args.scene):
+        print(f"{PROG}: warning: no material exported: the fit of channel(s) {', '.join(poor)} is poor "
+              "(--accept-poor exports it)", file=sys.stderr)
+    else:
+        for line in _write_exports(result, args, stem):
+            print(line, file=sys.stderr if args.json else sys.stdout)
     if args.json:
         if truth is not None:
             table = {**table, "truth": truth}
         print(json.dumps(json_safe(table), indent=2, allow_nan=False))
-        return
-    print(_format_table(table))
-    if truth is not None:
-        print("\ntruth beside estimate:")
-        print(f"{'channel':<8} {'sigma_a true':>13} {'estimate':>10} {'rel.err':>8} "
-              f"{'sigma_s_prime true':>19} {'estimate':>10} {'rel.err':>8}")
-        for i, ch in enumerate(table["channels"]):
-            ta, ts = truth["sigma_a"][i], truth["sigma_s_prime"][i]
-            ea, es = table["sigma_a"][i], table["sigma_s_prime"][i]
-            print(f"{ch:<8} {ta:>13.5g} {ea:>10.5g} {ea / ta - 1:>8.2%} {ts:>19.5g} {es:>10.5g} {es / ts - 1:>8.2%}")
-    if args.plot:
-        print(f"\nplot written to {args.plot}")
+    else:
+        print(_format_table(table))
+        if truth is not None:
+            print("\ntruth beside estimate:")
+            print(f"{'channel':<8} {'sigma_a true':>13} {'estimate':>10} {'rel.err':>8} "
+                  f"{'sigma_s_prime true':>19} {'estimate':>10} {'rel.err':>8}")
+            for i, ch in enumerate(table["channels"]):
+                ta, ts = truth["sigma_a"][i], truth["sigma_s_prime"][i]
+                ea, es = raw["sigma_a"][i], raw["sigma_s_prime"][i]
+                print(f"{ch:<8} {ta:>13.5g} {ea:>10.5g} {ea / ta - 1:>8.2%} {ts:>19.5g} {es:>10.5g} {es / ts - 1:>8.2%}")
+        if args.plot:
+            print(f"\nplot written to {args.plot}")
+    if poor and not args.accept_poor:
+        chi2 = ", ".join(f"{c:.3g}" for c, s in zip(raw["chi2_reduced"], table["status"]) if s == "poor")
+        print(f"{PROG}: error: the fit of channel(s) {', '.join(poor)} is poor (chi2/dof {chi2}), not a measurement: "
+              f"{LIKELY_CAUSES}; the estimate is kept apart ('estimate' in --json); --accept-poor exits 0",
+              file=sys.stderr)
+        return 1
+    return 0
 
 
 # ----------------------------------------------------------------------------- batch
@@ -427,10 +471,16 @@ def _fit_row(job, options) -> dict:
                      reference_reflectance=overrides.get("reference_reflectance", options["reference_reflectance"]),
                      model=options["model"], g=options["g"], view_angle_deg=options["view_angle_deg"])
         _refuse_failed(result)
-        table = result.table()
+        table = with_status(result.table())
         for key in _ROW_KEYS:
             for ch, value in zip(table["channels"], table[key]):
                 row[f"{key}_{ch}"] = value
+        if "estimate" in table:  # a poor channel: blank in the result's place, its numbers beside it
+            row["status"] = "poor"
+            for key, values in table["estimate"].items():
+                for ch, value, status in zip(table["channels"], values, table["status"]):
+                    if status == "poor":
+                        row[f"{key}_estimate_{ch}"] = value
         row["warnings"] = "; ".join(result.warnings)
     except Exception as error:  # recorded in the table, never dropped
         row.update(status="failed", error=f"{type(error).__name__}: {error}")
@@ -524,7 +574,7 @@ def _read_table(out: Path) -> list[dict]:
 
 
 def _resumed(jobs, settings, out):
-    """Rows already fitted (status ok) with the same settings, by position, and the positions
+    """Rows already fitted (status ok or poor) with the same settings, by position, and the positions
     still to fit (``--resume``). Rows come from the table ``out`` and then its journal (rows
     that finished after the table was last written: a batch killed outright). A row fitted
     with other settings (another ``--eta``, say) is fitted again."""
@@ -536,7 +586,7 @@ def _resumed(jobs, settings, out):
     old += _Journal(out).rows()
     done = {}
     for row in old:
-        if row.get("status") == "ok" and "file" in row:
+        if row.get("status") in ("ok", "poor") and "file" in row:  # a poor fit is done: it would come out the same
             done[(row["file"], row.get("settings"))] = row
     kept, todo, other = {}, [], 0
     for j, (job, setting) in enumerate(zip(jobs, settings)):
@@ -674,7 +724,8 @@ def _run_batch(jobs, settings, out: Path, args) -> list[dict]:
 
 
 def _batch(args) -> int:
-    """``fit-params batch``; returns the exit status (1 if any row failed).
+    """``fit-params batch``; returns the exit status (1 if any row failed, or if any is poor
+    without ``--accept-poor``).
 
     The table is written (atomically) as rows finish, at most once a second, and whatever
     finished is written when the batch stops early (an interrupt, a lost scheduler), so
@@ -693,11 +744,18 @@ def _batch(args) -> int:
     settings = [_settings(job, options) for job in jobs]
     with _locked(out):
         rows = _run_batch(jobs, settings, out, args)
-    failed = [r for r in rows if r["status"] != "ok"]
-    print(f"{len(rows) - len(failed)} fitted, {len(failed)} failed; table written to {args.out}")
+    failed = [r for r in rows if r["status"] not in ("ok", "poor")]
+    poor = [r for r in rows if r["status"] == "poor"]
+    print(f"{len(rows) - len(failed) - len(poor)} fitted, {len(poor)} poor, {len(failed)} failed; "
+          f"table written to {args.out}")
     for r in failed:
         print(f"  failed: {r['file']}: {r['error']}", file=sys.stderr)
-    return 1 if failed else 0
+    for r in poor:
+        channels = [key.rsplit("_", 1)[1] for key, value in r.items()
+                    if key.startswith("sigma_a_estimate_") and value not in ("", None)]
+        print(f"  poor: {r['file']}: channel(s) {', '.join(channels)}: chi2/dof above 100; the estimate is in the "
+              "*_estimate_* columns, not a measurement", file=sys.stderr)
+    return 1 if failed or (poor and not args.accept_poor) else 0
 
 
 if __name__ == "__main__":
