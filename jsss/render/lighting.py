@@ -21,8 +21,6 @@ object to reach it and where it entered (the *front* point's UV). Then the JAX p
 
 from __future__ import annotations
 
-import os
-import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +42,7 @@ from .environment import (
     environment_shadows,
     fibonacci_directions,
 )
+from .kept import save_arrays
 from .mesh import Mesh, shadows_itself
 from .raster import OrthographicView, PerspectiveView, rasterize, surface_attributes
 
@@ -179,10 +178,8 @@ def visibility_maps(mesh: Mesh) -> tuple[ShadowMap, ...]:
 
 def _write_maps(path: Path, maps) -> None:
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as handle:
-            np.savez_compressed(handle, depth=np.stack([m.depth for m in maps]), mask=np.stack([m.mask for m in maps]))
-        os.replace(handle.name, path)
+        save_arrays(path, {"depth": np.stack([m.depth for m in maps]), "mask": np.stack([m.mask for m in maps])},
+                    compressed=True)
     except OSError as error:  # a read-only cache folder must not stop a render
         warnings.warn(f"{path}: cannot keep the visibility maps there ({error})", stacklevel=3)
 
@@ -262,10 +259,14 @@ def _depth_test(positions, cosine, shadow: ShadowMap):
     ixc, iyc = np.clip(ix, 0, n - 1), np.clip(iy, 0, n - 1)
     front = np.where(inside, shadow.depth[iyc, ixc], np.inf)
     pixel = np.asarray(shadow.view.pixel_size(depth), float) * np.ones_like(depth)
-    # Slope-scaled bias: a map pixel spans more depth where the surface is seen edge-on.
+    return depth, front, depth > front + _slope_bias(pixel, cosine), (iyc, ixc)
+
+
+def _slope_bias(pixel, cosine):
+    """How much nearer than the map's front a point may lie and still count as lit: 1.5 map
+    texels, more where the surface is seen edge-on (a texel spans more depth there)."""
     tangent = np.sqrt(np.maximum(1 - cosine**2, 0)) / np.maximum(np.abs(cosine), 0.1)
-    bias = pixel * (1.5 + tangent)
-    return depth, front, depth > front + bias, (iyc, ixc)
+    return pixel * (1.5 + tangent)
 
 
 def _visible_share(positions, normals, valid, shadows) -> np.ndarray:
@@ -293,9 +294,9 @@ def _visible_share(positions, normals, valid, shadows) -> np.ndarray:
         share = np.float32(radiance) * cosine[above]
         total[above] += share
         lit_sum[above] += share * _filtered_visibility(points[above], cosine[above], shadow)
-    share = np.ones(valid.shape)
+    share = np.zeros(valid.shape)
     share[valid] = np.where(total > 0, lit_sum / np.where(total > 0, total, 1), 1)
-    return np.where(valid, share, 0.0).reshape(shape)
+    return share.reshape(shape)
 
 
 def _filtered_visibility(points, cosine, shadow: ShadowMap) -> np.ndarray:
@@ -315,8 +316,7 @@ def _filtered_visibility(points, cosine, shadow: ShadowMap) -> np.ndarray:
     fx, fy = np.clip(x - x0, 0, 1), np.clip(y - y0, 0, 1)
     corner = y0.astype(np.int64) * n + x0.astype(np.int64)
     front = np.pad(shadow.depth.astype(np.float32), 1, constant_values=np.inf).ravel()
-    tangent = np.sqrt(np.maximum(1 - cosine**2, 0)) / np.maximum(np.abs(cosine), np.float32(0.1))
-    reach = depth - np.float32(view.pixel_size()) * (np.float32(1.5) + tangent)  # the depth less the bias
+    reach = depth - _slope_bias(np.float32(view.pixel_size()), cosine)  # the depth less the bias
     top = (1 - fx) * (reach <= front[corner]) + fx * (reach <= front[corner + 1])
     bottom = (1 - fx) * (reach <= front[corner + n]) + fx * (reach <= front[corner + n + 1])
     return (1 - fy) * top + fy * bottom

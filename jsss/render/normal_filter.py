@@ -29,8 +29,6 @@ only where asked (``cache_dir=``, or a folder a console script named with
 
 from __future__ import annotations
 
-import os
-import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,6 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .kept import save_arrays
 from .mesh import Mesh, weld
 
 __all__ = ["Spectrum", "cotangent_laplacian", "keep_spectra_in", "laplacian_spectrum", "smooth_normals",
@@ -158,16 +157,8 @@ def laplacian_spectrum(mesh: Mesh, count: int = 128, *, cache_dir=None) -> Spect
 
 
 def _write_atomically(path: Path, spectrum: Spectrum) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-    try:
-        with os.fdopen(handle, "wb") as f:
-            np.savez(f, eigenvalues=spectrum.eigenvalues, eigenvectors=spectrum.eigenvectors,
-                     mass=spectrum.mass, index=spectrum.index, nyquist=spectrum.nyquist)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    save_arrays(path, {"eigenvalues": spectrum.eigenvalues, "eigenvectors": spectrum.eigenvectors,
+                       "mass": spectrum.mass, "index": spectrum.index, "nyquist": spectrum.nyquist})
 
 
 def spectral_filter(spectrum: Spectrum, signal, transfer) -> np.ndarray:

@@ -15,8 +15,6 @@ from __future__ import annotations
 import collections
 import functools
 import hashlib
-import os
-import tempfile
 import warnings
 from pathlib import Path
 
@@ -29,6 +27,7 @@ from ..diffusion import dipole
 from .. import layers as _layers
 from ..gaussians import GaussianSum, empirical_dipole_fit, evaluate, layers_as_gaussians, to_gaussian_sum
 from ..numerics import is_concrete
+from .kept import save_arrays
 from .scene import Material
 
 __all__ = ["choose_variances", "exact_profile", "full_profile", "keep_profiles_in", "reduction_error", "render_profile",
@@ -48,7 +47,7 @@ def full_profile(material: Material, medium=None) -> GaussianSum:
     return GaussianSum(gs.weights.reshape(gs.weights.shape[0], -1), gs.variances)
 
 
-_LAYERED_KEPT = 8  # stacks remembered by _remembered, per kind
+_LAYERED_KEPT = 8  # stacks (profiles and references together) remembered by _remembered
 _layered_profiles: collections.OrderedDict = collections.OrderedDict()
 # Where stacks' profiles are also kept on disk: None (the library's default) keeps them in memory
 # only; console scripts name a folder with keep_profiles_in.
@@ -114,11 +113,8 @@ def _remembered(kind: str, stack, extra: tuple, compute, build=lambda *arrays: a
 
 def _write_atomically(path: Path, arrays: tuple) -> None:
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz", delete=False) as handle:
-            np.savez(handle, **{f"a{i}": a for i, a in enumerate(arrays)})
-        os.replace(handle.name, path)
-    except OSError as error:
+        save_arrays(path, {f"a{i}": a for i, a in enumerate(arrays)})
+    except OSError as error:  # a read-only cache folder must not stop a render
         warnings.warn(f"{path}: cannot keep the profile there ({error})", stacklevel=4)
 
 
