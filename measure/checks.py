@@ -40,6 +40,19 @@ photons) gave a stated sigma_a error of 95 % with a half-field of 0.18 diffusion
 exceeds :data:`LOOSE_SIGMA_A` and the field is shorter than :data:`MIN_FIELD_DIFFUSION_LENGTHS`,
 :func:`field_warnings` names the field as the cause and the fix (larger pixels or a larger
 image), not the fit.
+
+**The calibration is not in the stated errors.** The fit weighs the image's total (per unit
+of the reference's) as one residual beside the profile, and at high albedo sigma_a follows the
+total steeply: for marble a 1 % error in the reference's reflectance or in the exposure ratio
+moves sigma_a by 7-15 %, measured by refitting the same synthetic image at 0.75 diffusion
+lengths and 6-9 % at 2-4 (``tests/measure/test_recovery.py``). A wider field does not remove
+this; it only raises chi^2/dof (3-5) where the decay disagrees with the total. The commands print
+the sensitivity :math:`|\partial \ln\sigma_a / \partial \ln R_d|`
+(:attr:`measure.pipeline.MeasurementFit.calibration_sensitivity`) beside every fit.
+
+**Scale is not in the profile.** Every coefficient scales as 1/pixel size: an image with
+``--pixel-mm`` ten times too large fits exactly as well, with sigma_a and sigma_s' ten times too
+small. No residual can show it, so the pixel size must be measured (:mod:`measure.target`).
 """
 
 from __future__ import annotations
@@ -137,7 +150,7 @@ def fit_quality(chi2_reduced) -> list[str]:
             out.append("ok")
         else:
             out.append(f"poor: chi2/dof {value:.3g} (expected about 1); likely a wrong eta, a wrong model "
-                       "(the dipole is biased near the source) or a wrong pixel size")
+                       "(the dipole is biased near the source) or a reference taken at another exposure")
     return out
 
 
@@ -167,3 +180,4 @@ def field_warnings(lengths, sigma_a, sigma_a_err, channels, *, field_mm: float, 
                        f"{diffusion_mm:.3g} mm), and sigma_a shows in the decay beyond; widen the field to "
                        f"{MIN_FIELD_DIFFUSION_LENGTHS:g}+ diffusion lengths (larger pixels or a larger image)")
     return out
+

@@ -247,7 +247,7 @@ def _check_clipping(image: ExrImage) -> None:
 
 
 def fit_images(images: MeasurementImages, eta: float, *, pixel_mm: float | None = None,
-               reference_reflectance: float = 0.99, model: str = "dipole", g: float = 0.0,
+               reference_reflectance: float = 0.99, model: str = "transport", g: float = 0.0,
                view_angle_deg: float | None = 0.0, grid=None, names: Mapping[str, str] | None = None):
     """Fit sigma_a and sigma_s' per channel to a measurement read by :func:`read_measurement`.
 
@@ -261,8 +261,9 @@ def fit_images(images: MeasurementImages, eta: float, *, pixel_mm: float | None 
     reference_reflectance : float, keyword-only
         Total reflectance of the white reference, in (0, 1] (0.99 for Spectralon).
     model : {"dipole", "transport"}, keyword-only
-        The profile model (:func:`fitting.medium.fit_medium`); ``"transport"`` (scaled Monte
-        Carlo tables, exact to radiative transfer) covers eta 1.0-1.6 and g in {0, 0.5, 0.8, 0.9}.
+        The profile model (:func:`fitting.medium.fit_medium`): ``"transport"`` (the default, as
+        ``fit-params``; scaled Monte Carlo tables, exact to radiative transfer) covers eta 1.0-1.6
+        and g in {0, 0.5, 0.8, 0.9}; ``"dipole"`` is diffusion.
     g : float, keyword-only
         Henyey-Greenstein g of the material (transport model).
     view_angle_deg : float or None, keyword-only

@@ -8,15 +8,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import jax.numpy as jnp
 import numpy as np
 
 from fitting.medium import MediumFit, fit_medium
+from jsss.medium import Medium
 
 from .checks import check_measurement, field_diffusion_lengths, field_warnings, fit_quality
+from .forward import diffuse_reflectance, observed
 from .profile import (Calibrated, RadialProfile, beam_center, beam_sigma, beam_window_mm, calibrate, channel_sums,
                       check_image, radial_profile)
 
 __all__ = ["MeasurementFit", "fit_measurement"]
+
 
 
 @dataclass(frozen=True)
@@ -29,10 +33,33 @@ class MeasurementFit:
     center: tuple[float, float]
     beam_sigma_mm: float
     channels: tuple[str, ...]
-    model: str = "dipole"
+    model: str = "transport"
     g: float = 0.0
     view_angle_deg: float | None = 0.0
     field_mm: float = np.inf
+    r_min_mm: float = 0.0
+    pixel_mm: float = np.nan
+
+    @property
+    def diffuse_reflectance(self) -> np.ndarray:
+        """The fitted medium's total diffuse reflectance R_d per channel (:func:`diffuse_reflectance`)."""
+        return np.asarray(diffuse_reflectance(self.fit.medium, model=self.model, g=self.g), float).reshape(-1)
+
+    @property
+    def fitted_bins(self) -> np.ndarray:
+        """The fitted model's value in each bin of :attr:`profile` ``(B, C)``: the observable the
+        fit compared with the bins (radiance factor toward the camera, or exitance), convolved with
+        the beam and averaged over the same pixels. Bins inside ``r_min_mm`` were not fitted."""
+        return _model_bins(self)
+
+    @property
+    def normalized_residuals(self) -> np.ndarray:
+        """``(measured - model) / stderr`` per bin and channel ``(B, C)``; NaN for the bins the fit
+        left out (inside ``r_min_mm``, or without an error)."""
+        prof = self.profile
+        fitted = (prof.r_mm >= self.r_min_mm)[:, None] & (prof.stderr > 0)
+        safe = np.where(fitted, prof.stderr, 1.0)
+        return np.where(fitted, (prof.mean - self.fitted_bins) / safe, np.nan)
 
     @property
     def field_diffusion_lengths(self) -> np.ndarray:
@@ -46,6 +73,22 @@ class MeasurementFit:
         (:func:`measure.checks.field_warnings`)."""
         return field_warnings(self.field_diffusion_lengths, self.fit.medium.sigma_a, self.fit.sigma_a_err,
                               self.channels, field_mm=self.field_mm, quality=self.quality)
+
+    @property
+    def calibration_sensitivity(self) -> np.ndarray:
+        r"""How far sigma_a moves, relatively, per relative error of the calibration (the
+        reference's reflectance, the exposure ratio), which the stated errors leave out:
+        :math:`|\partial \ln \sigma_a / \partial \ln R_d|` at fixed sigma_s' ``(C,)``
+        (:mod:`measure.checks`). Marble's red: 11.7, where refitting with a 1 % brighter reference
+        moved sigma_a 9-15 %."""
+        medium = self.fit.medium
+        sigma_a = jnp.asarray(medium.sigma_a)
+        step = 1e-3
+        totals = [diffuse_reflectance(Medium(sigma_a * factor, medium.sigma_s_prime, medium.eta), model=self.model,
+                                      g=self.g) for factor in (np.exp(-step), np.exp(step))]
+        slope = (np.log(np.asarray(totals[1], float)) - np.log(np.asarray(totals[0], float))) / (2 * step)
+        with np.errstate(divide="ignore"):
+            return np.abs(1.0 / slope).reshape(-1)
 
     @property
     def failures(self) -> list[str]:
@@ -92,8 +135,11 @@ class MeasurementFit:
             "sigma_a_err": as_list(f.sigma_a_err),
             "sigma_s_prime_err": as_list(f.sigma_s_prime_err),
             "eta": as_list(np.broadcast_to(np.asarray(f.medium.eta), np.shape(f.medium.sigma_a))),
-            "total_reflectance": as_list(f.total_reflectance),
+            "total_reflectance": as_list(self.diffuse_reflectance),
+            "observable_total": as_list(f.total_reflectance),
             "total_reflectance_in_image": as_list(self.calibrated.total_reflectance),
+            "sigma_a_per_calibration": as_list(self.calibration_sensitivity),
+            "pixel_mm": float(self.pixel_mm),
             "mean_free_path_mm": as_list(1.0 / (np.asarray(f.medium.sigma_a) + np.asarray(f.medium.sigma_s_prime))),
             "rel_residual": as_list(f.rel_residual),
             "converged": [bool(x) for x in np.asarray(f.converged).reshape(-1)],
@@ -126,7 +172,7 @@ def _sum_variance(images, center, pixel_mm):
 
 
 def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, reference_reflectance: float = 0.99,
-                    model: str = "dipole", g: float = 0.0, view_angle_deg: float | None = 0.0,
+                    model: str = "transport", g: float = 0.0, view_angle_deg: float | None = 0.0,
                     channels=("R", "G", "B"), n_bins: int = 48, r_min_mm: float | None = None,
                     grid=None, fit_options: dict | None = None) -> MeasurementFit:
     """Calibrate, bin and fit one measurement (images ``(H, W, C)``).
@@ -136,7 +182,10 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     image is dominated by the sample rather than by the beam's core. ``grid`` is the
     Hankel grid of the model (build one with :func:`jsss.layers.hankel.hankel_grid` and pass it
     when fitting many measurements). ``model`` and ``g`` choose the profile model (see
-    :func:`fitting.medium.fit_medium`); ``fit_options`` passes its solver options (``init``,
+    :func:`fitting.medium.fit_medium`): ``"transport"`` (the default, as ``fit-params``: the scaled
+    Monte Carlo tables, exact to radiative transfer, eta 1.0-1.6, g in {0, 0.5, 0.8, 0.9}) or
+    ``"dipole"`` (diffusion: tens of percent off near the beam and at low albedo; on the demo's
+    marble its sigma_a came out 32-93 % low with chi2/dof 3e4); ``fit_options`` passes its solver options (``init``,
     ``n_starts``, ``max_steps``, ``rtol``, ``atol``).
 
     The image contract (README): a pixel is proportional to the radiance toward the camera,
@@ -195,4 +244,17 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     height, width = calibrated.reflectance.shape[:2]
     field_mm = pixel_mm * (min(center[0], center[1], height - 1 - center[0], width - 1 - center[1]) + 0.5)
     return MeasurementFit(fit, profile, calibrated, center, sigma, tuple(channels), model, float(g), view_angle_deg,
-                          float(field_mm))
+                          float(field_mm), float(r_min), float(pixel_mm))
+
+
+def _model_bins(result: MeasurementFit) -> np.ndarray:
+    """The fitted observable, beam-convolved, averaged over each bin's pixels (``(B, C)``)."""
+    prof = result.profile
+    at_pixels = observed(result.fit.medium, prof.pixel_r_mm, result.beam_sigma_mm, model=result.model, g=result.g,
+                         view_angle_deg=result.view_angle_deg)
+    n_bins = prof.r_mm.size
+    sums = np.stack([np.bincount(prof.bin_index, at_pixels[:, c], minlength=n_bins)[:n_bins]
+                     for c in range(at_pixels.shape[1])], axis=-1)
+    counts = np.bincount(prof.bin_index, minlength=n_bins)[:n_bins]
+    return sums / np.maximum(counts, 1)[:, None]
+

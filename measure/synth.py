@@ -17,21 +17,14 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from functools import partial
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from jsss import transport
-from jsss.diffusion import dipole
-from jsss.layers import hankel
-from fitting.programs import reusable_program
-from jsss.beam import observable
 from jsss.medium import Medium
 
 from .exr import write_exr
+from .forward import diffuse_reflectance, observed
 
 __all__ = ["SyntheticMeasurement", "synthesize", "write_measurement"]
 
@@ -48,40 +41,6 @@ class SyntheticMeasurement:
     truth: dict = field(default_factory=dict)
 
 
-def _observed(medium: Medium, radii_mm: np.ndarray, beam_sigma_mm: float, grid=None, *, model="dipole", g=0.0,
-              view_angle_deg=0.0) -> np.ndarray:
-    """What the calibrated image holds (exitance, or pi (1 - F(0)) L toward the camera), the
-    model convolved with the Gaussian beam, at the given radii: shape radii.shape + C."""
-    grid = hankel.hankel_grid() if grid is None else grid
-    if model == "transport":
-        transport.check_medium(medium, g=g)  # the evaluation below is jitted, where it cannot check
-    view_cos = None if view_angle_deg is None else float(np.cos(np.radians(view_angle_deg)))
-    radii_mm = np.asarray(radii_mm, dtype=float)
-    values = _beam_convolved(medium, grid, jnp.asarray(beam_sigma_mm, grid.r.dtype), radii_mm, model=model, g=float(g),
-                             view_cos=view_cos)
-    return np.asarray(values).reshape(radii_mm.shape + (-1,))
-
-
-# One program, not some sixty eager operations compiled one by one (8 s of fit-params --demo).
-@reusable_program(static_argnames=("model", "g", "view_cos"))
-@partial(jax.jit, static_argnames=("model", "g", "view_cos"))
-def _beam_convolved(medium, grid, beam_sigma_mm, radii_mm, *, model, g, view_cos):
-    # The fit's own forward model (jsss.beam.observable), so the two cannot drift apart:
-    # a spectrum for the dipole, a profile on the transform grid for transport.
-    values, _ = observable(model, g, view_cos, medium, grid.k, grid.r)
-    spectrum = values.reshape(grid.k.shape[0], -1)
-    if model == "transport":
-        spectrum = grid.forward_matrix @ spectrum
-    spectrum = spectrum * jnp.exp(-grid.k[:, None] ** 2 * beam_sigma_mm**2 / 2)
-    return hankel.at_radii(grid, hankel.inverse(grid, spectrum), radii_mm)
-
-
-@reusable_program(static_argnames=("model", "g"))
-@partial(jax.jit, static_argnames=("model", "g"))
-def _total_reflectance(medium, *, model, g):  # jitted for the reason above (4 s eager)
-    return transport.total_reflectance(medium, g=g) if model == "transport" else dipole.total_reflectance(medium)
-
-
 def _beam(radii_mm, beam_sigma_mm, channels):
     g = np.exp(-(radii_mm**2) / (2 * beam_sigma_mm**2)) / (2 * np.pi * beam_sigma_mm**2)
     return np.repeat(g[..., None], channels, axis=-1)
@@ -91,7 +50,7 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
                power: float = 1.0, gain: float = 1.0, photons_per_unit: float = 1e7, read_noise: float = 2.0,
                dark_level: float = 0.0, exposures=None, saturation: float | None = None,
                reference_reflectance: float = 0.99, center_offset=(0.3, -0.2), noise: bool = True,
-               view_angle_deg: float | None = 0.0, model: str = "dipole", g: float = 0.0, seed: int = 0,
+               view_angle_deg: float | None = 0.0, model: str = "transport", g: float = 0.0, seed: int = 0,
                grid=None) -> SyntheticMeasurement:
     """Simulate a measurement of ``medium`` (RGB or one channel) and its white reference.
 
@@ -128,8 +87,8 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
         the image contract of :func:`measure.pipeline.fit_measurement`. None gives exitance
         images (the contract before 2026-11-25).
     model : {"dipole", "transport"}, keyword-only
-        The profile the images are made with: the dipole (diffusion exit law for radiance),
-        or the transport tables (their radiance; Henyey-Greenstein ``g``). Either way the
+        The profile the images are made with: the transport tables (the default, as the fit's;
+        their radiance; Henyey-Greenstein ``g``), or the dipole (diffusion exit law for radiance). Either way the
         images agree with the model of the same name in the fit by construction: for a
         truth outside the models use :mod:`measure.synth_transport`.
     g : float, keyword-only
@@ -142,7 +101,7 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
     rows, cols = np.indices((size, size))
     radii = np.hypot(rows - centre[0], cols - centre[1]) * pixel_mm
     scale = gain * power
-    sample = scale * _observed(medium, radii, beam_sigma_mm, grid, model=model, g=g, view_angle_deg=view_angle_deg)
+    sample = scale * observed(medium, radii, beam_sigma_mm, grid, model=model, g=g, view_angle_deg=view_angle_deg)
     channels = sample.shape[-1]
     reference = scale * reference_reflectance * _beam(radii, beam_sigma_mm, channels)
 
@@ -163,7 +122,7 @@ def synthesize(medium: Medium, *, pixel_mm: float = 0.05, size: int = 256, beam_
 
     truth = dict(sigma_a=np.asarray(medium.sigma_a).tolist(), sigma_s_prime=np.asarray(medium.sigma_s_prime).tolist(),
                  eta=np.asarray(medium.eta).tolist(),
-                 total_reflectance=np.asarray(_total_reflectance(medium, model=model, g=float(g))).tolist(),
+                 total_reflectance=np.asarray(diffuse_reflectance(medium, model=model, g=float(g))).tolist(),
                  pixel_mm=pixel_mm, size=size, beam_sigma_mm=beam_sigma_mm, center=list(centre),
                  reference_reflectance=reference_reflectance, photons_per_unit=photons_per_unit, read_noise=read_noise,
                  dark_level=dark_level, exposures=None if exposures is None else list(exposures), saturation=saturation,

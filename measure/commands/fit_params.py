@@ -5,6 +5,7 @@
     fit-params T0.exr T1.exr T2.exr --saturation 0.2 --reference REF.exr ...   (exposure brackets)
     fit-params --demo [--json] [--plot fit.png]
     fit-params batch DIR_OR_GLOB --out table.csv [--eta 1.3] [--pixel-mm 0.05] [--manifest M.csv]
+    fit-params pixel-size CHECKERBOARD.png --square-mm 2   (measure the pixel size on the sample)
 
 The measurement itself is :mod:`measure.files` (read and check the files, fit them); this
 module is the command line around it. Bad input gives a one-line error and exit status 2,
@@ -47,7 +48,9 @@ OPTION_NAMES = {"eta": "--eta", "pixel_mm": "--pixel-mm", "reference_reflectance
 # ----------------------------------------------------------------------------- command line
 def _fit_options(parser):
     """The options of a fit, shared by a single fit and ``batch``."""
-    parser.add_argument("--pixel-mm", type=float, help="pixel size on the sample [mm] (default: EXR header)")
+    parser.add_argument("--pixel-mm", type=float,
+                        help="pixel size on the sample [mm] (default: EXR header). No fit can check it: every "
+                             "coefficient scales as 1/pixel size. Measure it: fit-params pixel-size --help")
     parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
     parser.add_argument("--reference-reflectance", type=float, default=0.99,
                         help="total reflectance of the reference (default 0.99, Spectralon)")
@@ -116,7 +119,60 @@ def parser() -> argparse.ArgumentParser:
     commands = add_commands(top, default=single, dest="command", metavar="MEASUREMENT ... | batch",
                             help=f"{_MEASUREMENT_HELP}; or the subcommand:")
     _batch_parser(commands)
+    _pixel_size_parser(commands)
     return top
+
+
+def _pixel_size_parser(commands):
+    sizer = commands.add_parser(
+        "pixel-size", help="measure the pixel size on the sample from a checkerboard photo (fit-params pixel-size --help)",
+        description=("Measure the pixel size on the sample from a photo of a printed checkerboard lying where the "
+                     "sample lies, same camera and lens setting (measure.target): a beam-profile fit cannot see "
+                     "scale, so a wrong --pixel-mm fits as well as the right one, with every coefficient off by "
+                     "the same factor. The board may be turned; it should fill most of the frame."))
+    sizer.add_argument("image", help="the checkerboard photo: EXR, camera raw, TIFF, PNG or JPEG (8 bits will do)")
+    sizer.add_argument("--square-mm", type=float, required=True, help="the printed squares' edge [mm]")
+    sizer.add_argument("--json", action="store_true", help="print JSON instead of a sentence")
+    sizer.add_argument("--version", action="version", version=version(f"{PROG} pixel-size"))
+    sizer.set_defaults(run=_pixel_size)
+
+
+def _pixel_size(args) -> int:
+    from measure.target import checker_square_px
+
+    if not (math.isfinite(args.square_mm) and args.square_mm > 0):
+        raise UsageError(f"--square-mm must be > 0 (the printed squares' edge in mm); got {args.square_mm:g}")
+    path = Path(args.image)
+    if not path.is_file():
+        raise UsageError(f"{path}: no such file")
+    pixels = _read_any(path)
+    try:
+        square_px = checker_square_px(pixels)
+    except ValueError as error:
+        raise UsageError(f"{path}: {error}") from None
+    pixel_mm = args.square_mm / square_px
+    if args.json:
+        print(json.dumps({"pixel_mm": pixel_mm, "square_px": square_px, "square_mm": args.square_mm,
+                          "image": str(path)}, indent=2))
+    else:
+        print(f"pixel size on the sample: {pixel_mm:.5g} mm (squares of {square_px:.4g} px, {args.square_mm:g} mm); "
+              f"pass --pixel-mm {pixel_mm:.5g}")
+    return 0
+
+
+def _read_any(path):
+    """Pixels of any image a camera or a phone writes: the measurement formats, and 8-bit files
+    (only the pattern's period matters here, not linearity)."""
+    from measure.photo import RAW_SUFFIXES, read_image
+
+    if path.suffix.lower() == ".exr" or path.suffix.lower() in RAW_SUFFIXES:
+        return read_image(path).pixels
+    import imageio.v3 as iio
+
+    try:
+        return iio.imread(path)
+    except (OSError, ValueError, RuntimeError) as error:  # what imageio's plugins raise on a bad file
+        raise UsageError(f"{path}: cannot read the image ({type(error).__name__}: {error})") from None
 
 
 def _batch_parser(commands):
@@ -215,6 +271,9 @@ def _read_and_fit(measurement, reference, **read_options):
     return fit
 
 
+DEMO_PIXEL_MM = 0.14
+
+
 def _demo(args, say) -> int:
     from jsss.materials import jensen2001
     from measure.synth import synthesize, write_measurement
@@ -226,14 +285,15 @@ def _demo(args, say) -> int:
         directory = Path(args.keep) if args.keep else Path(stack.enter_context(
             tempfile.TemporaryDirectory(prefix="jsss-demo-")))
         say("synthesizing the demo's images")
-        synthetic = synthesize(marble, pixel_mm=0.05, size=256, beam_sigma_mm=0.05, photons_per_unit=1e5, seed=1,
-                               model="transport", grid=fit_grid())
+        # 0.14 mm pixels frame 2.1 diffusion lengths of red (the advice of measure.checks), where 0.05 mm framed 0.75
+        synthetic = synthesize(marble, pixel_mm=DEMO_PIXEL_MM, size=256, beam_sigma_mm=DEMO_PIXEL_MM,
+                               photons_per_unit=1e5, seed=1, model="transport", grid=fit_grid())
         paths = write_measurement(directory, synthetic, name="marble")
         if not args.json:
             where = (f"written to {directory} (marble.exr, marble_ref.exr, marble_dark.exr, marble.json)" if args.keep
                      else "(temporary files; --keep DIR keeps them)")
-            print(f"demo: synthetic camera image of marble (transport tables, 256 x 256 px, 0.05 mm pixels, "
-                  f"Gaussian beam 0.05 mm, shot and read noise) {where}")
+            print(f"demo: synthetic camera image of marble (transport tables, eta 1.5, 256 x 256 px, {DEMO_PIXEL_MM} mm "
+                  f"pixels, Gaussian beam {DEMO_PIXEL_MM} mm, shot and read noise) {where}")
         say(f"fitting {args.model} (the first fit compiles: 10-20 s)")
         fit = _read_and_fit(paths["measurement"], paths["reference"], dark=paths.get("dark"))
         result = fit(1.5, model=args.model, g=args.g, view_angle_deg=_view_angle(args))
@@ -301,31 +361,57 @@ def _format_table(table) -> str:
     return "\n".join(lines)
 
 
+def _footer(result, args, table) -> list[str]:
+    """What the table's numbers rest on that no residual can show: the field in diffusion lengths,
+    the calibration's leverage on sigma_a, and the pixel size (:mod:`measure.checks`)."""
+    names = " / ".join(table["channels"])
+
+    def each(key, form):
+        return " / ".join(format(value, form) for value in table[key])
+
+    source = "--pixel-mm" if args.pixel_mm else ("the demo" if args.demo else "the measurement's header")
+    field = (f"\nfield: {each('field_diffusion_lengths', '.2g')} diffusion lengths ({names}; 2+ lets the profile's "
+             "decay measure sigma_a)")
+    calibration = ("calibration: a 1 % error in --reference-reflectance or the exposure ratio moves sigma_a by "
+                   f"{each('sigma_a_per_calibration', '.2g')} % (not in the stated errors)")
+    scale = (f"scale: pixel {result.pixel_mm:.4g} mm from {source}; every coefficient scales as 1/pixel size, which no "
+             "fit can check (measure it: fit-params pixel-size)")
+    return [field, calibration, scale]
+
+
 def _plot(result, path):
+    """What was fitted, and how well: the calibrated bins (the camera's radiance factor, or exitance)
+    with their errors and the fitted model's value in each bin (beam-convolved, averaged over the
+    same pixels), and below them the residuals in units of each bin's error. A good fit's residuals
+    scatter within +-2; a wrong model's run in arcs of tens."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from jsss import transport
-    from jsss.diffusion import dipole
-
     prof = result.profile
-    fig, ax = plt.subplots(figsize=(6, 4))
-    r = np.geomspace(max(prof.r_mm[0], 1e-3), prof.r_mm[-1], 200)
-    if result.model == "transport":
-        model = np.asarray(transport.profile(result.fit.medium, r, g=result.g)).reshape(r.size, -1)
-    else:
-        model = np.asarray(dipole.profile(result.fit.medium, r)).reshape(r.size, -1)
+    fitted = prof.r_mm >= result.r_min_mm
+    model, residuals = result.fitted_bins, result.normalized_residuals
+    chi2 = np.asarray(result.fit.chi2_reduced, float).reshape(-1)
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 5.6), sharex=True, height_ratios=(3, 1.4))
     colours = {"R": "tab:red", "G": "tab:green", "B": "tab:blue"}
     for c, name in enumerate(result.channels):
         colour = colours.get(name, "k")
-        ax.errorbar(prof.r_mm, prof.mean[:, c], yerr=prof.stderr[:, c], fmt=".", ms=3, color=colour,
-                    label=f"{name} measured")
-        ax.plot(r, model[:, c], "-", color=colour, lw=1, label=f"{name} {result.model} fit")
-    ax.set(xscale="log", yscale="log", xlabel="r [mm]", ylabel="R_d(r) [1/mm^2]", title="fit-params")
-    ax.legend(fontsize=7)
+        top.errorbar(prof.r_mm[fitted], prof.mean[fitted, c], yerr=prof.stderr[fitted, c], fmt=".", ms=3,
+                     color=colour, label=f"{name} measured")
+        top.plot(prof.r_mm[~fitted], prof.mean[~fitted, c], "x", ms=4, color=colour, alpha=0.5)
+        top.plot(prof.r_mm[fitted], model[fitted, c], "-", color=colour, lw=1,
+                 label=f"{name} {result.model} fit, chi2/dof {chi2[c]:.3g}")
+        bottom.plot(prof.r_mm, residuals[:, c], ".-", ms=3, lw=0.5, color=colour)
+    quantity = ("exitance per unit entering flux [1/mm^2]" if result.view_angle_deg is None
+                else f"pi (1-F0) L at {result.view_angle_deg:g} deg [1/mm^2]")
+    top.set(xscale="log", yscale="log", ylabel=quantity,
+            title=f"fit-params: {result.model} model, bins from r = {result.r_min_mm:.3g} mm (x: not fitted)")
+    top.legend(fontsize=7)
+    for level in (-2, 0, 2):
+        bottom.axhline(level, color="0.6", lw=0.6, ls="-" if level == 0 else ":")
+    bottom.set(xlabel="r [mm]", ylabel="(data - fit) / error")
     fig.tight_layout()
     kind = Path(path).suffix.lower().lstrip(".") or "png"  # the temporary file's name has no suffix
     write_atomically(path, lambda tmp: fig.savefig(tmp, dpi=120, format=kind))
@@ -380,6 +466,7 @@ def _report(result, args, truth=None, extra=None, stem="fitted") -> int:
         print(json.dumps(json_safe(table), indent=2, allow_nan=False))
     else:
         print(_format_table(table))
+        print("\n".join(_footer(result, args, table)))
         if truth is not None:
             print("\ntruth beside estimate:")
             print(f"{'channel':<8} {'sigma_a true':>13} {'estimate':>10} {'rel.err':>8} "
