@@ -1,13 +1,18 @@
 """fit-params batch throughput against the number of Dask workers (images per second).
 
-    python benchmarks/batch.py [--images 50] [--size 256] [--workers 1 2 4]
+    python benchmarks/batch.py [--images 50] [--size 256] [--workers 1 2 4] [--warm-only] [--platform cpu]
+                               [--write docs/benchmarks/batch.md]
 
 Writes ``--images`` synthetic camera images (marble, skin1, apple, ketchup in turn; transport
 tables, shot and read noise) to a temporary folder, then times ``fit-params batch`` on them
 once per worker count: the whole command as a user runs it (start-up, compilation in every
 worker, fits, the table), so the ratio to one worker is what a user gains. One worker is the
 in-process path (XLA threads over every core); Dask workers are separate processes. Every run starts with an empty compilation cache of its own (cold, as on a
-new machine), then runs once more on the cache it filled (warm).
+new machine), then runs once more on the cache it filled (warm). ``--warm-only`` fills one shared
+cache with a batch of 4 images first and times only warm runs (for many worker counts on a
+machine lent for minutes). ``--platform`` sets ``JAX_PLATFORMS`` for the command (``cpu``, or
+``cuda`` for a GPU: there the workers share one device). ``--write`` appends the dated table to a
+markdown page.
 
 "cores busy" is the CPU time of the command and all its processes (user + system, from
 ``getrusage`` of the waited-for children) over its wall time: how much of the machine one
@@ -44,10 +49,19 @@ def main(argv=None):
     parser.add_argument("--images", type=int, default=50)
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--workers", type=int, nargs="*", default=[1, 2, 4])
+    parser.add_argument("--warm-only", action="store_true")
+    parser.add_argument("--platform", help="JAX_PLATFORMS for the command (default: JAX's choice)")
+    parser.add_argument("--write", help="append the dated table to this markdown file")
     args = parser.parse_args(argv)
+    lines = []
+
+    def say(line):
+        print(line, flush=True)
+        lines.append(line)
+
     load = os.getloadavg()[0]
-    print(f"# benchmarks/batch.py, {time.strftime('%Y-%m-%d')}, {platform.machine()} x{os.cpu_count()} cores, "
-          f"load {load:.1f}; {args.images} images of {args.size}^2, transport model")
+    say(f"\n### {time.strftime('%Y-%m-%d')}: {platform.machine()} x{os.cpu_count()} cores, load {load:.1f}, "
+        f"JAX_PLATFORMS={args.platform or '(default)'}; {args.images} images of {args.size}^2, transport model\n")
     with tempfile.TemporaryDirectory() as folder:
         grid = hankel.hankel_grid()
         manifest = ["measurement,reference,dark,eta"]
@@ -59,12 +73,25 @@ def main(argv=None):
             manifest.append(f"{name}{i}.exr,{name}{i}_ref.exr,{name}{i}_dark.exr,{ETA[name]}")
         with open(os.path.join(folder, "manifest.csv"), "w") as handle:
             handle.write("\n".join(manifest) + "\n")
-        print("| workers | cache | seconds | images / s | x one worker (same cache state) | cores busy | failed rows |")
-        print("|---:|---|---:|---:|---:|---:|---:|")
+        say("| workers | cache | seconds | images / s | x one worker (same cache state) | cores busy | failed rows |")
+        say("|---:|---|---:|---:|---:|---:|---:|")
         base = {}
+        platform_env = {"JAX_PLATFORMS": args.platform} if args.platform else {}
+        if args.warm_only:
+            shared = os.path.join(folder, "xla")
+            with open(os.path.join(folder, "manifest.csv")) as handle:
+                first = handle.read().splitlines()[:5]
+            with open(os.path.join(folder, "warmup.csv"), "w") as handle:
+                handle.write("\n".join(first) + "\n")
+            for workers in sorted(set(args.workers)):  # every worker count's programs, once
+                subprocess.run([sys.executable, "-m", "measure.commands.fit_params", "batch", "--manifest",
+                                os.path.join(folder, "warmup.csv"), "--out", os.path.join(folder, f"warm{workers}.csv"),
+                                "--workers", str(workers)], capture_output=True, stdin=subprocess.DEVNULL,
+                               env={**os.environ, **platform_env, "JAX_COMPILATION_CACHE_DIR": shared})
         for workers in args.workers:
-            env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": os.path.join(folder, f"xla{workers}")}
-            for state in ("cold", "warm"):
+            cache = shared if args.warm_only else os.path.join(folder, f"xla{workers}")
+            env = {**os.environ, **platform_env, "JAX_COMPILATION_CACHE_DIR": cache}
+            for state in (("warm",) if args.warm_only else ("cold", "warm")):
                 out = os.path.join(folder, f"table{workers}{state}.csv")
                 before = resource.getrusage(resource.RUSAGE_CHILDREN)
                 t0 = time.perf_counter()
@@ -76,10 +103,13 @@ def main(argv=None):
                 cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
                 failed = sum(1 for line in open(out) if ",failed," in line) if os.path.exists(out) else args.images
                 base.setdefault(state, seconds)
-                print(f"| {workers} | {state} | {seconds:.1f} | {args.images / seconds:.2f} | "
-                      f"{base[state] / seconds:.2f} | {cpu / seconds:.2f} of {os.cpu_count()} | {failed} |", flush=True)
+                say(f"| {workers} | {state} | {seconds:.1f} | {args.images / seconds:.2f} | "
+                    f"{base[state] / seconds:.2f} | {cpu / seconds:.2f} of {os.cpu_count()} | {failed} |")
                 if run.returncode not in (0, 1):
                     print(run.stderr[-2000:], file=sys.stderr)
+    if args.write:
+        with open(args.write, "a") as handle:
+            handle.write("\n".join(lines) + "\n")
     return 0
 
 
