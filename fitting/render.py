@@ -55,7 +55,7 @@ from jsss.render import (Material, Method, Pass, Scene, camera_buffers, deposit_
                          plan_scene, render_params)
 from jsss.render.profiles import render_profile
 
-__all__ = ["RenderFit", "RenderFitError", "fit_pixels", "fit_render"]
+__all__ = ["GAIN_PINNED", "RenderFit", "RenderFitError", "fit_pixels", "fit_render", "gain_from_reference"]
 
 
 class RenderFitError(ValueError):
@@ -73,7 +73,8 @@ class RenderFit:
     sigma_a_err, sigma_s_prime_err : ndarray [1/mm]
         One-sigma standard errors.
     gain, gain_err : float
-        The exposure gain (photo / linear radiance) and its error (0 when not fitted).
+        The exposure gain (photo / linear radiance) and its error (0 when held; inf where the
+        photo could not resolve it from R_d, :data:`GAIN_PINNED`).
     reflectance, reflectance_err : ndarray
         Total diffuse reflectance R_d of the profile model at the estimate, and its error.
     mean_free_path, mean_free_path_err : ndarray [mm]
@@ -134,6 +135,59 @@ class RenderFit:
                 "pixels": int(self.n_pixels), "method": self.method, "profile_model": self.profile_model,
                 "parameters": list(self.parameter_names), "covariance": np.asarray(self.covariance).tolist(),
                 "warnings": list(self.warnings), "history": list(self.history)}
+
+
+def gain_from_reference(scene: Scene, photo, reflectance: float = 0.99, *, mask=None,
+                        saturation: float | None = None) -> tuple[float, float]:
+    r"""The photo's exposure gain from a white (or grey) Lambertian target of known reflectance.
+
+    ``scene`` holds the target's geometry, as photographed with the same camera settings and
+    lights as the material's photo: a card in the same frame (give the same photo, and ``mask``
+    its pixels) or a photo of its own. Its material is ignored: the target renders as an ideal
+    diffuser of albedo ``reflectance`` (radiance :math:`\rho E / \pi`, no specular: the index-
+    matched, non-absorbing medium, whose total reflectance is exactly 1, under Lambert). The
+    gain is the median of photo over render across the target's pixels (robust to hot pixels
+    and a path tracer's fireflies), and its relative standard error
+    :math:`1.253 \cdot 1.4826\,\mathrm{MAD} / (\mathrm{median} \sqrt{n})` (the median's efficiency
+    for Gaussian scatter).
+
+    Returns
+    -------
+    gain, relative_error : float
+        Pass both to :func:`fit_render` (``gain=``, ``gain_err=``).
+
+    Raises
+    ------
+    RenderFitError
+        A reflectance outside (0, 1], a photo that does not match the camera, fewer than 10
+        target pixels, or a target that renders black (unlit).
+    """
+    reflectance = float(reflectance)
+    if not (np.isfinite(reflectance) and 0 < reflectance <= 1):
+        raise RenderFitError(f"reflectance must lie in (0, 1] (0.99 for Spectralon, 0.18 for a grey card); "
+                             f"got {reflectance:g}.")
+    if not scene.lights:
+        raise RenderFitError(f"{scene.source}: the reference scene has no lights; it needs the material photo's lights.")
+    photo = np.asarray(photo, float)
+    white = Material("white reference", np.ones(3), medium=Medium(np.zeros(3), np.ones(3), np.ones(3)),
+                     specular=0.0, roughness=scene.material.roughness)
+    target_scene = dataclasses.replace(scene, material=white)
+    plan = plan_scene(target_scene, method=Method.LAMBERT)
+    for decision in plan.decisions:
+        if decision.on:
+            plan = plan.replace(decision.name, False, "a white diffuser: albedo times irradiance")
+    from jsss.render import render
+
+    model = reflectance * np.asarray(render(target_scene, plan, dtype=jnp.float64).radiance)
+    use = fit_pixels(target_scene, photo, mask=mask, saturation=saturation)
+    use &= np.all(model > 0, axis=-1)
+    if use.sum() < 10:
+        raise RenderFitError(f"{scene.source}: only {int(use.sum())} lit pixels of the reference target (needs 10); "
+                             "is the camera looking at it, and is it lit?")
+    ratio = (photo[use] / model[use]).reshape(-1)
+    gain = float(np.median(ratio))
+    spread = 1.4826 * float(np.median(np.abs(ratio - gain)))
+    return gain, max(1.2533 * spread / (gain * np.sqrt(ratio.size)), 1e-12)
 
 
 def fit_pixels(scene: Scene, photo, *, mask=None, saturation: float | None = None,
@@ -233,13 +287,52 @@ def _incidence_moved(before: Scene, after: Scene) -> float:
 
 
 @functools.lru_cache(maxsize=16)
-def _residual_fn(render, fit_gain, block):
+def _residual_fn(render, fit_gain, block, prior):
+    """Whitened residuals of the photo; with ``prior``, one more: the fitted ln gain's distance
+    from a reference's, in units of that reference's relative error. ``exposure`` (in ``args``)
+    holds the held gain, the reference's ln gain and its inverse relative error."""
     def residuals(theta, args):
-        data, photo, mask, inverse_sigma, eta = args
+        data, photo, mask, inverse_sigma, eta, exposure = args
         medium = _medium(theta, eta)
-        gain = jnp.exp(theta[6]) if fit_gain else 1.0
-        return (_block_sums((gain * render(medium, data) - photo) * mask, block) * inverse_sigma).reshape(-1)
+        gain = jnp.exp(theta[6]) if fit_gain else exposure[0]
+        pixels = (_block_sums((gain * render(medium, data) - photo) * mask, block) * inverse_sigma).reshape(-1)
+        if not prior:
+            return pixels
+        return jnp.concatenate([pixels, ((theta[6] - exposure[1]) * exposure[2])[None]])
     return residuals
+
+
+# With the gain fitted and no reference, the gain counts as pinned by the photo (the specular
+# highlight, whose Fresnel reflectance is known physics, or the profile's shape) only where its
+# relative error is below this; else brightness is gain x R_d, one direction the photo cannot
+# resolve (issue 36: a subsurface-only photo gave gain 11.8 +- 5.4 and R_d 0.063 for a white
+# stone of 0.8, 26 errors off, reported as converged).
+GAIN_PINNED = 0.05
+
+NO_EXPOSURE = ("the photo's exposure is unknown, and a photo's brightness is gain x R_d: give a reference (a photo "
+               "of a white target of known reflectance: fitting.render.gain_from_reference, jsss-render fit "
+               "--reference-scene/--reference-photo), the camera's gain (gain=G, --gain G; 1 for calibrated "
+               "radiance, --no-gain), or fit it explicitly (gain='fit', --fit-gain), which leaves R_d and the gain one "
+               "direction unless the photo pins the gain")
+
+
+def _exposure(gain, gain_err):
+    """``(fit_gain, start, prior)`` from fit_render's ``gain`` and ``gain_err``: whether ln gain is a
+    parameter, the held or starting gain, and whether a reference's error ties it down."""
+    if gain is None:
+        raise RenderFitError(NO_EXPOSURE + ".")
+    if isinstance(gain, str):
+        if gain != "fit":
+            raise RenderFitError(f"gain must be a positive number, 'fit' or None; got {gain!r}.")
+        return True, None, False
+    if isinstance(gain, bool | np.bool_):  # before 2026-12-04: True fitted it, False held it at 1
+        return (True, None, False) if gain else (False, 1.0, False)
+    value, error = float(gain), float(gain_err)
+    if not (np.isfinite(value) and value > 0):
+        raise RenderFitError(f"gain must be > 0 (photo value per unit linear radiance); got {value:g}.")
+    if not (np.isfinite(error) and error >= 0):
+        raise RenderFitError(f"gain_err must be >= 0 (the gain's relative standard error); got {error:g}.")
+    return error > 0, value, error > 0
 
 
 def _block_sums(image, block: int):
@@ -280,7 +373,7 @@ def _model_for(scene, plan, dtype, profile_model, g):
 
 def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=None, saturation: float | None = None,
                method: str | None = None, accuracy: float = 0.001, samples: int | None = None, profile_model: str | None = None,
-               g: float | None = None, init: Medium | None = None, gain: bool = True, specular: bool = True,
+               g: float | None = None, init: Medium | None = None, gain=None, gain_err: float = 0.0, specular: bool = True,
                max_steps: int = 200, replans: int = 3, unconstrained: float = 0.5, dtype=jnp.float64,
                block: int = 1, rim_mm: float = 0.0, progress=None) -> RenderFit:
     """Fit the scene's homogeneous material to ``photo``, a linear HDR image from the scene's camera.
@@ -310,8 +403,19 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         320 x 240) where 0.1 % left it within its errors.
     profile_model, g : optional
         ``"dipole"`` or ``"transport"`` (and its phase function's g); default: the scene's.
-    gain : bool
-        Fit an unknown exposure gain (default); False for a camera calibrated to radiance.
+    gain : float, "fit" or None
+        The photo's exposure, photo value per unit linear radiance: required, since brightness is
+        gain x R_d and no photo of subsurface light alone tells them apart. A number is the
+        user's word (1 for a camera calibrated to radiance), or a reference's
+        (:func:`gain_from_reference`, with its ``gain_err``). ``"fit"`` fits it: where the photo
+        does not pin it (its relative error above :data:`GAIN_PINNED`; a specular highlight, whose
+        Fresnel reflectance is known, can) the gain, R_d and sigma_a get infinite errors, the fit
+        is not ``converged``, and a warning says how to add a reference. None (the default)
+        raises :class:`RenderFitError` with that advice. (``True``/``False``: "fit" and 1, as
+        before 2026-12-04.)
+    gain_err : float
+        Relative standard error of a given ``gain`` (a reference's): above 0 the gain is fitted
+        with that prior, so its error reaches sigma_a and R_d; 0 holds it.
     specular : bool
         Render the surface reflection (held fixed); False when the photo holds subsurface light only.
     max_steps, replans, unconstrained
@@ -343,9 +447,10 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         raise RenderFitError(f"{scene.source}: the scene has no lights; a photo of an unlit object constrains no material.")
     if not (noise > 0 and np.isfinite(noise)):
         raise RenderFitError(f"noise must be a positive relative error; got {noise!r}.")
+    fit_gain, held_gain, prior = _exposure(gain, gain_err)
     photo = np.asarray(photo, float)
     use = fit_pixels(scene, photo, mask=mask, saturation=saturation, rim_mm=rim_mm)
-    n_params = 7 if gain else 6
+    n_params = 7 if fit_gain else 6
     if use.sum() * 3 < 10 * n_params:
         raise RenderFitError(f"photo: only {int(use.sum())} pixels of the object can be fitted (needs at least "
                              f"{int(np.ceil(10 * n_params / 3))}); is the camera looking at the object?")
@@ -368,7 +473,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     absorption = jnp.maximum(jnp.broadcast_to(jnp.asarray(start.sigma_a, dtype), (3,)), 1e-6 * scattering)
     theta = jnp.concatenate([jnp.log(absorption),  # a start without absorption: its logarithm must be finite
                              jnp.log(scattering),
-                             jnp.zeros(1 if gain else 0, dtype)])
+                             jnp.full(1 if fit_gain else 0, np.log(held_gain or 1.0), dtype)])
     if not (isinstance(block, int) and block >= 1):
         raise RenderFitError(f"block must be a positive integer; got {block!r}.")
     mask = use[..., None].astype(float)
@@ -403,7 +508,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     for round_ in range(replans + 1):
         say(f"round {round_ + 1}: {plan.method}: the passes that stay fixed during the fit")
         render, data = _model_for(fit_scene, plan, dtype, profile_model, g)
-        if gain and round_ == 0:  # the best gain for the start: a linear least-squares problem
+        if fit_gain and not prior and round_ == 0:  # the best gain for the start: linear least squares
             model = np.asarray(render(fit_scene.material.medium, data))
             w2 = np.asarray(inverse_sigma) ** 2
             model_b = np.asarray(_block_sums(model * np.asarray(mask), block))
@@ -411,8 +516,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
             best = (model_b * photo_b * w2).sum() / max((model_b**2 * w2).sum(), 1e-300)
             theta = theta.at[6].set(jnp.log(jnp.asarray(max(best, 1e-300), dtype)))
         say(f"round {round_ + 1}: Levenberg-Marquardt on {int(use.sum())} pixels (the first solve compiles)")
-        residuals = _residual_fn(render, gain, block)
-        args = (data, target, mask, inverse_sigma, eta)
+        residuals = _residual_fn(render, fit_gain, block, prior)
+        exposure = jnp.asarray([held_gain or 1.0, np.log(held_gain or 1.0), 1.0 / gain_err if prior else 0.0], dtype)
+        args = (data, target, mask, inverse_sigma, eta, exposure)
         theta, n_steps, solved, jac = _solve(residuals, theta, args, max_steps=max_steps,
                                              rtol=1e-8, atol=1e-10)
         steps += int(n_steps)
@@ -447,7 +553,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         say(history[-1])
         fit_scene, plan = next_scene, next_plan
     r = np.asarray(residuals(theta, args))
-    m = int(block_used.sum()) * 3  # used tiles times channels
+    m = int(block_used.sum()) * 3 + int(prior)  # used tiles times channels, and the reference's gain
     chi2 = reduced_chi2(r @ r, m, n_params)
     J = np.asarray(jac)
     if not (np.isfinite(r).all() and np.isfinite(J).all()):
@@ -463,7 +569,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     artist = np.asarray(_artist(theta[:6], profile_model, g, eta))
     artist_err = standard_errors(np.pad(A, ((0, 0), (0, len(theta_np) - 6))), cov, null)
     sigma_a, sigma_s = np.exp(theta_np[:3]), np.exp(theta_np[3:6])
-    names = [f"ln sigma_a {c}" for c in "RGB"] + [f"ln sigma_s' {c}" for c in "RGB"] + (["ln gain"] if gain else [])
+    names = [f"ln sigma_a {c}" for c in "RGB"] + [f"ln sigma_s' {c}" for c in "RGB"] + (["ln gain"] if fit_gain else [])
     loose = [f"{name[3:]} ({'inf' if not np.isfinite(e) else f'{100 * e:.0f} %'})"
              for name, e in zip(names, rel) if not e <= unconstrained]
     if loose:
@@ -476,17 +582,26 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     if edge:
         notes.append("ran to the edge of the parameters: no absorption left in " + "/".join(edge)
                      + (" (with the gain fitted, brightness is gain x R_d and the fit traded one for the other; "
-                        "hold the gain for a calibrated camera: gain=False, --no-gain)" if gain else ""))
+                        "hold the gain for a calibrated camera: gain=1, --no-gain)" if fit_gain else ""))
     if chi2 > 4:
         notes.append(f"poor fit: chi2/dof {chi2:.1f} (expected about 1); the errors are widened by its square root. "
                      "Likely a wrong eta, geometry or light, a noise level set too low, or the profile model's bias")
     final = Medium(jnp.asarray(sigma_a), jnp.asarray(sigma_s), material.eta)
     image = np.asarray(render(_medium(theta, eta), data))
-    gain_value = float(np.exp(theta_np[6])) if gain else 1.0
-    return RenderFit(final, sigma_a * rel[:3], sigma_s * rel[3:6], gain_value,
-                     gain_value * float(rel[6]) if gain else 0.0, artist[:3], artist_err[:3], artist[3:],
+    gain_value = float(np.exp(theta_np[6])) if fit_gain else held_gain
+    sigma_a_err, gain_rel = sigma_a * rel[:3], float(rel[6]) if fit_gain else 0.0
+    unresolved = fit_gain and not prior and not gain_rel <= GAIN_PINNED
+    if unresolved:  # one direction, gain x R_d: no finite error along it (GAIN_PINNED)
+        notes.insert(0, f"exposure unresolved: the photo's brightness is gain x R_d and nothing in it separates them "
+                        f"(the fitted gain's relative error is {100 * gain_rel:.0f} %, above {100 * GAIN_PINNED:g} %); "
+                        "R_d, sigma_a and the gain have no finite error: photograph a white target of known "
+                        "reflectance (--reference-scene/--reference-photo) or give the camera's gain (--gain)")
+        gain_rel, sigma_a_err = np.inf, np.full(3, np.inf)
+        artist_err = np.concatenate([np.full(3, np.inf), artist_err[3:]])
+    return RenderFit(final, sigma_a_err, sigma_s * rel[3:6], gain_value,
+                     gain_value * gain_rel, artist[:3], artist_err[:3], artist[3:],
                      artist_err[3:], cov, tuple(names), chi2, steps,
-                     bool(solved) and not edge and bool(np.all(np.isfinite(theta_np)))
+                     bool(solved) and not edge and not unresolved and bool(np.all(np.isfinite(theta_np)))
                      and bool(np.all(np.isfinite(rel))),
                      int(use.sum()), plan.method, profile_model,
                      image * gain_value, use, tuple(notes), tuple(history))

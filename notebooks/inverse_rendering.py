@@ -22,7 +22,11 @@
 # What a photo can and cannot tell:
 #
 # * its **brightness** per channel gives gain x R_d, the exposure gain times the total diffuse
-#   reflectance (photos have no absolute scale, so the gain is fitted by default);
+#   reflectance. Photos have no absolute scale, so `fit_render` asks where the gain comes from:
+#   a white target of known reflectance (`gain_from_reference`), the camera's word (`gain=G`),
+#   or `gain="fit"`, which is a result only where something in the photo pins the gain (here:
+#   the specular highlight, whose Fresnel reflectance is known physics) and is otherwise
+#   reported unresolved, with infinite errors for R_d, sigma_a and the gain;
 # * the **blur** of light into the shadow gives the diffusion length 1/sigma_tr,
 #   sigma_tr = sqrt(3 sigma_a sigma_t');
 # * the **mean free path** 1/sigma_t' shows only where the profile is resolved: a pixel much
@@ -77,7 +81,7 @@ plt.imshow(tone_map(photo)[0]); plt.axis("off"); plt.title("the photo");
 
 # %%
 start = Medium(3 * np.asarray(truth.sigma_a), np.asarray(truth.sigma_s_prime) / 2, truth.eta)
-fit = fit_render(scene, photo, init=start)
+fit = fit_render(scene, photo, init=start, gain="fit")
 print(f"{fit.method}, {fit.steps} solver steps, chi2/dof {fit.chi2_reduced:.2f}, converged {fit.converged}")
 for line in fit.history:
     print("  ", line)
@@ -112,7 +116,7 @@ for ax in axes:
 # together freely: the fit reports infinite errors and a warning instead of a confident number.
 
 # %%
-lambert = fit_render(scene, photo, method="lambert", init=start)
+lambert = fit_render(scene, photo, method="lambert", init=start, gain="fit")
 print("converged:", lambert.converged)
 print("R_d", np.round(lambert.reflectance, 4), "+-", np.round(lambert.reflectance_err, 4))
 print("mean free path error:", lambert.mean_free_path_err)

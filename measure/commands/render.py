@@ -66,6 +66,18 @@ standard errors, the artist's reflectance and mean free path, the covariance, wa
 PHOTO.fit.toml (the scene with the fitted material, which jsss-render renders as it is; the
 rest of the scene file is kept, comments included) and PHOTO.fit.png (photo, fit and whitened
 residual side by side). Exit status 2 on bad input (one line).
+
+The photo's exposure must come from somewhere, since its brightness is gain x R_d:
+* a white or grey target of known reflectance, photographed with the same camera and light
+  (flags: --reference-scene CARD.toml [--reference-photo REF.exr] [--reference-reflectance]), in
+  the photo itself (CARD.toml places the card; --reference-mask marks its pixels) or in a
+  photo of its own; the gain and its error enter the fit;
+* the camera's word: --gain G [--gain-err E], or --no-gain (G = 1: calibrated radiance);
+* --fit-gain: fit it; unless the photo pins it (its error under 5 %), R_d, sigma_a and the
+  gain then have no finite error, converged is false, and the exit status is 1.
+Example, a grey card of 18 % photographed beside the sample:
+  jsss-render fit sphere.toml photo.exr --reference-scene card.toml --reference-reflectance 0.18
+Exit status 1 where the exposure is unresolved.
 """
 
 _DESCRIPTION = ("Render TOML scenes of translucent objects to a PNG (display) and an EXR (linear radiance), planning "
@@ -140,8 +152,22 @@ def _fit_parser(commands, methods):
     p.add_argument("--accuracy", type=float, default=0.001,
                    help="accuracy target of the fit's renders (default 0.001: a fit needs a stricter render than "
                         "a display does)")
-    p.add_argument("--no-gain", action="store_true",
-                   help="the photo is calibrated radiance: hold the exposure gain at 1")
+    exposure = p.add_argument_group("the photo's exposure (one of these is required; see below)")
+    exposure.add_argument("--reference-scene", metavar="CARD.toml",
+                          help="scene of a white or grey Lambertian target as photographed (same camera and lights)")
+    exposure.add_argument("--reference-photo", metavar="REF.exr",
+                          help="the target's photo (default: the photo being fitted, the card in its frame)")
+    exposure.add_argument("--reference-mask", metavar="MASK",
+                          help="image: the target's pixels are non-zero (default: wherever the scene puts it)")
+    exposure.add_argument("--reference-reflectance", type=float, default=0.99,
+                          help="the target's reflectance (default 0.99, Spectralon; 0.18 for a grey card)")
+    exposure.add_argument("--gain", type=float, help="the camera's gain: photo value per unit linear radiance")
+    exposure.add_argument("--gain-err", type=float, default=0.0,
+                          help="relative standard error of --gain (default 0: held)")
+    exposure.add_argument("--no-gain", action="store_true",
+                          help="the photo is calibrated radiance: the gain is 1")
+    exposure.add_argument("--fit-gain", action="store_true",
+                          help="fit the gain (unresolved from R_d unless the photo pins it)")
     p.add_argument("--no-specular", action="store_true", help="the photo holds subsurface light only")
     p.add_argument("--rim-mm", type=float, default=0.0,
                    help="leave out pixels within this distance [mm] of an open surface's rim (default 0)")
@@ -340,15 +366,17 @@ def _fit(args) -> int:
         raise UsageError(f"{args.photo}: holds no light (no pixel above 0); a fit needs a photo of the lit object")
     mask = _read_mask(args.mask, photo.shape[:2]) if args.mask else None
     method = None if args.method == "auto" else Method(args.method)
+    gain, gain_err, exposure = _exposure(args, photo, say)
     t0 = time.perf_counter()
     result = fit_render(scene, photo, noise=args.noise, mask=mask, saturation=args.saturation, method=method,
-                        accuracy=args.accuracy, profile_model=args.profile, g=args.g, gain=not args.no_gain,
+                        accuracy=args.accuracy, profile_model=args.profile, g=args.g, gain=gain, gain_err=gain_err,
                         specular=not args.no_specular, rim_mm=args.rim_mm,
                         progress=lambda line: say(f"{args.scene}: {line}"))
     seconds = time.perf_counter() - t0
     out = Path(args.output)
     stem = Path(args.photo).name.rsplit(".", 1)[0]
-    summary = result.as_dict() | {"scene": str(args.scene), "photo": str(args.photo), "seconds": round(seconds, 3)}
+    summary = result.as_dict() | {"scene": str(args.scene), "photo": str(args.photo), "seconds": round(seconds, 3),
+                                  "exposure": exposure}
     material = scene.material
     fitted = fitted_material(result.medium, profile=summary["profile_model"],
                              g=material.g if args.g is None else args.g, roughness=material.roughness,
@@ -374,9 +402,51 @@ def _fit(args) -> int:
                 ("mean free path [mm]", summary["mean_free_path_mm"], summary["mean_free_path_err_mm"])]
         for name, values, errors in rows:
             print(f"  {name:<20}" + "  ".join(f"{v:.5g} +- {e:.2g}" for v, e in zip(values, errors)))
-        print(f"  {'gain':<20}{summary['gain']:.5g} +- {summary['gain_err']:.2g}")
+        print(f"  {'gain':<20}{summary['gain']:.5g} +- {summary['gain_err']:.2g} ({exposure})")
     print("wrote " + ", ".join(str(p) for p in [*files, figure]), file=sys.stderr if args.json else sys.stdout)
+    if any(w.startswith("exposure unresolved") for w in result.warnings):
+        print(f"{args.prog}: error: the exposure is unresolved, so R_d and sigma_a are not measurements: add a white "
+              "target of known reflectance (--reference-scene CARD.toml, --reference-reflectance) or give the gain "
+              "(--gain G)", file=sys.stderr)
+        return 1
     return 0
+
+
+def _exposure(args, photo, say):
+    """``(gain, gain_err, how)`` for fit_render from the exposure flags (one source, or exit 2)."""
+    given = [flag for flag, on in (("--reference-scene", args.reference_scene), ("--gain", args.gain is not None),
+                                   ("--no-gain", args.no_gain), ("--fit-gain", args.fit_gain)) if on]
+    if len(given) > 1:
+        raise UsageError(f"{' and '.join(given)}: give one source of the photo's exposure")
+    for flag, value in (("--reference-photo", args.reference_photo), ("--reference-mask", args.reference_mask)):
+        if value and not args.reference_scene:
+            raise UsageError(f"{flag} goes with --reference-scene CARD.toml (the target's geometry and lights)")
+    if not given:
+        raise UsageError("the photo's exposure is unknown, and a photo's brightness is gain x R_d: give a white target "
+                         "of known reflectance (--reference-scene CARD.toml), the camera's gain (--gain G, or --no-gain "
+                         "for calibrated radiance), or --fit-gain (R_d and the gain then stay one direction unless the "
+                         "photo pins the gain)")
+    if not (math.isfinite(args.gain_err) and args.gain_err >= 0):
+        raise UsageError(f"--gain-err must be >= 0 (the gain's relative standard error); got {args.gain_err:g}")
+    if args.fit_gain:
+        return "fit", 0.0, "fitted"
+    if args.no_gain:
+        return 1.0, 0.0, "given: --no-gain"
+    if args.gain is not None:
+        if not (math.isfinite(args.gain) and args.gain > 0):
+            raise UsageError(f"--gain must be > 0 (photo value per unit linear radiance); got {args.gain:g}")
+        return args.gain, args.gain_err, "given: --gain"
+    from fitting.render import gain_from_reference
+    from jsss.render import load_scene
+    from measure.photo import read_image
+
+    say(f"{args.reference_scene}: the exposure from the reference target")
+    card = load_scene(args.reference_scene, allow_outside=args.allow_outside_paths)
+    reference = read_image(args.reference_photo).pixels[..., :3] if args.reference_photo else photo
+    mask = _read_mask(args.reference_mask, reference.shape[:2]) if args.reference_mask else None
+    gain, error = gain_from_reference(card, reference, args.reference_reflectance, mask=mask)
+    return gain, error, (f"reference: {args.reference_scene}, reflectance {args.reference_reflectance:g}, "
+                         f"gain {gain:.5g} +- {100 * error:.2g} %")
 
 
 if __name__ == "__main__":

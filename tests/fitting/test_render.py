@@ -87,7 +87,7 @@ def test_recovers_the_material_and_gain_within_the_stated_errors(scene):
     """A 1 %-noise render, fitted from 2x the absorption and 2/3 of the scattering: the truth
     within 3 stated standard errors, chi^2 per degree of freedom about 1."""
     photo = _photo(scene)
-    fit = fit_render(scene, photo, init=_start(scene))
+    fit = fit_render(scene, photo, init=_start(scene), gain="fit")
     truth = scene.material.medium
     z_a = (np.asarray(fit.medium.sigma_a) - np.asarray(truth.sigma_a)) / fit.sigma_a_err
     z_s = (np.asarray(fit.medium.sigma_s_prime) - np.asarray(truth.sigma_s_prime)) / fit.sigma_s_prime_err
@@ -106,7 +106,7 @@ def test_methods_without_spread_report_the_mean_free_path_unconstrained(scene, m
     fit must say so (infinite errors, a warning, not converged) instead of printing a
     confident value, while the albedo it does see is recovered."""
     photo = _photo(scene, method=method, noise=0.003)
-    fit = fit_render(scene, photo, method=method, init=_start(scene))
+    fit = fit_render(scene, photo, method=method, init=_start(scene), gain="fit")
     assert any("not constrained" in w for w in fit.warnings) and not fit.converged
     assert np.all(fit.mean_free_path_err / fit.mean_free_path > 0.5)
     truth_rd = np.asarray(dipole.total_reflectance(scene.material.medium))
@@ -131,7 +131,7 @@ def test_bad_input_is_one_clear_error(scene, case, message):
     elif case == "channels":
         photo = np.ones((48, 64))
     with pytest.raises(RenderFitError, match=message):
-        fit_render(scene, photo)
+        fit_render(scene, photo, gain="fit")
 
 
 def test_fit_command_writes_parameters_a_renderable_scene_and_a_figure(scene, tmp_path):
@@ -143,7 +143,7 @@ def test_fit_command_writes_parameters_a_renderable_scene_and_a_figure(scene, tm
     run = lambda *extra: subprocess.run(  # noqa: E731
         [sys.executable, "-m", "measure.commands.render", "fit", str(tmp_path / "sphere.toml"), *extra],
         capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=900, cwd=tmp_path)
-    out = run(str(tmp_path / "photo.exr"), "--json", "-o", str(tmp_path / "fit"))
+    out = run(str(tmp_path / "photo.exr"), "--json", "-o", str(tmp_path / "fit"), "--fit-gain")
     assert out.returncode == 0, out.stderr
     result = json.loads(out.stdout)
     for key in ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err"):
@@ -155,7 +155,7 @@ def test_fit_command_writes_parameters_a_renderable_scene_and_a_figure(scene, tm
     assert np.allclose(np.asarray(fitted.material.medium.sigma_a), result["sigma_a"], rtol=1e-6)
     assert (tmp_path / "fit" / "photo.fit.png").stat().st_size > 10_000
     write_exr(tmp_path / "small.exr", np.ones((24, 32, 3)))
-    bad = run(str(tmp_path / "small.exr"))
+    bad = run(str(tmp_path / "small.exr"), "--fit-gain")
     assert bad.returncode == 2
     assert bad.stderr.strip().count("\n") == 0 and "32 x 24 pixels" in bad.stderr
 

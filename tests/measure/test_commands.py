@@ -103,7 +103,8 @@ def test_help_lists_every_option_with_its_explanation(name, parser):
 
 @pytest.mark.parametrize("module, extra", [
     ("measure.commands.render", []), ("measure.commands.render", ["fit"]), ("measure.commands.fit_params", []),
-    ("measure.commands.fit_params", ["batch"]), ("measure.commands.info", [])])
+    ("measure.commands.fit_params", ["batch"]), ("measure.commands.fit_params", ["pixel-size"]),
+    ("measure.commands.info", [])])
 def test_every_command_has_a_version_and_plain_help(module, extra):
     """--version on each command and subcommand; help text without reST markup (before:
     ``jsss-render``: in the description), and every option explained."""
