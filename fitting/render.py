@@ -55,7 +55,8 @@ from jsss.render import (Material, Method, Pass, Scene, camera_buffers, deposit_
                          plan_scene, render_params)
 from jsss.render.profiles import render_profile
 
-__all__ = ["GAIN_PINNED", "RenderFit", "RenderFitError", "fit_pixels", "fit_render", "gain_from_reference"]
+__all__ = ["GAIN_PINNED", "RenderFit", "RenderFitError", "estimate_noise", "fit_pixels", "fit_render",
+           "gain_from_reference"]
 
 
 class RenderFitError(ValueError):
@@ -82,7 +83,9 @@ class RenderFit:
     covariance : ndarray (n, n)
         Of the fitted parameters ``parameter_names`` (logarithms of sigma_a, sigma_s', gain).
     chi2_reduced : float
-        chi^2 per degree of freedom of the whitened residuals (about 1 when model and noise fit).
+        chi^2 per degree of freedom of the whitened residuals (about 1 when model and noise fit;
+        with Huber's loss, their median square over its Gaussian value 0.4549, which outliers
+        do not move).
     steps : int; converged : bool
         Solver steps (all outer rounds); the solver met its tolerances, every parameter is
         finite and has a finite standard error (the image constrains it), and no channel ran
@@ -99,6 +102,8 @@ class RenderFit:
         Unconstrained parameters, a poor fit.
     history : tuple of str
         What each round re-planned, and why.
+    sigma : ndarray (H, W, 3)
+        Each pixel's standard error as fitted (given, or estimated from the photo).
     """
 
     medium: Medium
@@ -122,6 +127,7 @@ class RenderFit:
     mask: np.ndarray
     warnings: tuple = ()
     history: tuple = ()
+    sigma: np.ndarray | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready summary (lists per channel)."""
@@ -286,16 +292,30 @@ def _incidence_moved(before: Scene, after: Scene) -> float:
     return float(np.max(np.abs(new / old - 1)))
 
 
+HUBER_K = 1.345  # Huber's threshold in standard errors: 95 % of least squares' efficiency for Gaussian noise
+
+
+def _huber(r):
+    """Residuals whose squares sum to Huber's loss (times 2): ``r`` within +-k, beyond it
+    ``sign(r) sqrt(2 k |r| - k^2)``, which grows as sqrt|r| (continuous, with a continuous slope)."""
+    magnitude = jnp.abs(r)
+    outer = jnp.sqrt(jnp.maximum(2 * HUBER_K * magnitude - HUBER_K**2, HUBER_K**2))  # double where: finite slope
+    return jnp.where(magnitude <= HUBER_K, r, jnp.sign(r) * outer)
+
+
 @functools.lru_cache(maxsize=16)
-def _residual_fn(render, fit_gain, block, prior):
-    """Whitened residuals of the photo; with ``prior``, one more: the fitted ln gain's distance
-    from a reference's, in units of that reference's relative error. ``exposure`` (in ``args``)
-    holds the held gain, the reference's ln gain and its inverse relative error."""
+def _residual_fn(render, fit_gain, block, prior, robust=False):
+    """Whitened residuals of the photo (Huber-transformed with ``robust``); with ``prior``, one
+    more: the fitted ln gain's distance from a reference's, in units of that reference's relative
+    error. ``exposure`` (in ``args``) holds the held gain, the reference's ln gain and its inverse
+    relative error."""
     def residuals(theta, args):
         data, photo, mask, inverse_sigma, eta, exposure = args
         medium = _medium(theta, eta)
         gain = jnp.exp(theta[6]) if fit_gain else exposure[0]
         pixels = (_block_sums((gain * render(medium, data) - photo) * mask, block) * inverse_sigma).reshape(-1)
+        if robust:
+            pixels = _huber(pixels)
         if not prior:
             return pixels
         return jnp.concatenate([pixels, ((theta[6] - exposure[1]) * exposure[2])[None]])
@@ -335,6 +355,66 @@ def _exposure(gain, gain_err):
     return error > 0, value, error > 0
 
 
+def estimate_noise(residual, expected, use) -> np.ndarray:
+    r"""Each pixel's standard error from the residuals of a first fit: the variance
+    :math:`a + b\,\mu + c\,\mu^2` in the expected value :math:`\mu`, fitted per channel: read
+    noise, shot noise, and noise proportional to the signal (a path tracer's at a fixed sample
+    count, a relative error).
+
+    The variance is read from the differences of horizontally and vertically adjacent residuals,
+    :math:`\mathrm{Var}(d_p - d_q) = \sigma_p^2 + \sigma_q^2`, so a misfit that is smooth over a
+    pixel (a biased model) does not pass for noise and still shows in chi^2; each of 12 bins of
+    :math:`\mu` takes its variance from the median absolute difference (1.4826 MAD: robust to
+    fireflies and hot pixels), and :math:`a, b, c \ge 0` are fitted to the bins by non-negative least
+    squares weighted by their pixel counts.
+
+    Parameters
+    ----------
+    residual, expected : ndarray (H, W, C)
+        Photo minus fitted render, and the fitted render (gain applied).
+    use : ndarray (H, W) of bool
+        The fitted pixels.
+
+    Returns
+    -------
+    ndarray (H, W, C): the standard error of every pixel (positive everywhere).
+
+    Raises
+    ------
+    RenderFitError
+        Fewer than 200 adjacent pairs of fitted pixels: too few to estimate a noise model (give
+        the noise instead).
+    """
+    from scipy.optimize import nnls
+
+    pairs = [(np.s_[:, 1:], np.s_[:, :-1]), (np.s_[1:, :], np.s_[:-1, :])]
+    both = [use[a] & use[b] for a, b in pairs]
+    if sum(int(m.sum()) for m in both) < 200:
+        raise RenderFitError("too few adjacent fitted pixels (under 200) to estimate the photo's noise; give it "
+                             "(noise=..., --noise).")
+    sigma = np.empty_like(expected, dtype=float)
+    for c in range(expected.shape[-1]):
+        diff = np.concatenate([(residual[a][..., c] - residual[b][..., c])[m] for (a, b), m in zip(pairs, both)])
+        level = np.concatenate([(0.5 * (expected[a][..., c] + expected[b][..., c]))[m] for (a, b), m in zip(pairs, both)])
+        order = np.argsort(level)
+        rows, weights = [], []
+        for chunk in np.array_split(order, 12):
+            d = diff[chunk]
+            spread = 1.4826 * np.median(np.abs(d - np.median(d)))
+            mu = max(float(np.median(level[chunk])), 0.0)
+            rows.append((1.0, mu, mu**2, spread**2 / 2))
+            weights.append(np.sqrt(chunk.size))
+        rows = np.asarray(rows)
+        weights = np.asarray(weights)
+        # Relative weights: each bin's variance is known to about 1/sqrt(n) of itself, whatever its size.
+        scale = weights / np.maximum(rows[:, 3], 1e-300)
+        (a, b, q), _ = nnls(rows[:, :3] * scale[:, None], rows[:, 3] * scale)
+        floor = 1e-6 * max(float(rows[:, 3].max()), 1e-300)
+        mu = np.maximum(expected[..., c], 0.0)
+        sigma[..., c] = np.sqrt(np.maximum(a + b * mu + q * mu**2, floor))
+    return sigma
+
+
 def _block_sums(image, block: int):
     """Sums over ``block`` x ``block`` tiles (H and W multiples of it); the image itself for 1."""
     if block == 1:
@@ -371,7 +451,8 @@ def _model_for(scene, plan, dtype, profile_model, g):
     return render, ()
 
 
-def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=None, saturation: float | None = None,
+def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str = "huber", mask=None,
+               saturation: float | None = None,
                method: str | None = None, accuracy: float = 0.001, samples: int | None = None, profile_model: str | None = None,
                g: float | None = None, init: Medium | None = None, gain=None, gain_err: float = 0.0, specular: bool = True,
                max_steps: int = 200, replans: int = 3, unconstrained: float = 0.5, dtype=jnp.float64,
@@ -387,8 +468,17 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     photo : array (H, W, 3)
         Linear radiance up to the gain, at the camera's resolution.
     sigma : array broadcastable to photo, optional
-        Each pixel's standard error. Default: ``noise`` times the pixel value, floored at
-        ``noise`` times 1 % of the channel's 99th percentile (dark pixels).
+        Each pixel's standard error. Default: from ``noise``.
+    noise : "estimate" or float
+        ``"estimate"`` (default): from the photo itself (:func:`estimate_noise`, read + shot noise
+        fitted to the differences of adjacent residuals of a first fit, which is then solved again
+        with it). A number: the relative noise of a pixel, that times the pixel value, floored at
+        1 % of the channel's 99th percentile times it (dark pixels). A noise set too low is what
+        made a path-traced photo's fit report chi2/dof 510 and errors that missed the truth.
+    loss : {"huber", "squared"}
+        ``"huber"`` (default): Huber's loss on the whitened residuals (quadratic within 1.345
+        standard errors, linear beyond), so that heavy-tailed pixels (a path tracer's fireflies,
+        a camera's hot pixels) do not steer the fit; ``"squared"``: plain least squares.
     mask, saturation, rim_mm
         See :func:`fit_pixels`.
     method : str, optional
@@ -445,8 +535,15 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
                              "fit_render measures; remove it to fit.")
     if not scene.lights:
         raise RenderFitError(f"{scene.source}: the scene has no lights; a photo of an unlit object constrains no material.")
-    if not (noise > 0 and np.isfinite(noise)):
-        raise RenderFitError(f"noise must be a positive relative error; got {noise!r}.")
+    estimate = isinstance(noise, str)
+    if estimate and noise != "estimate":
+        raise RenderFitError(f"noise must be 'estimate' or a positive relative error; got {noise!r}.")
+    if not estimate and not (float(noise) > 0 and np.isfinite(float(noise))):
+        raise RenderFitError(f"noise must be 'estimate' or a positive relative error; got {noise!r}.")
+    if loss not in ("huber", "squared"):
+        raise RenderFitError(f"loss must be 'huber' or 'squared'; got {loss!r}.")
+    robust = loss == "huber"
+    estimate = estimate and sigma is None
     fit_gain, held_gain, prior = _exposure(gain, gain_err)
     photo = np.asarray(photo, float)
     use = fit_pixels(scene, photo, mask=mask, saturation=saturation, rim_mm=rim_mm)
@@ -454,9 +551,10 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     if use.sum() * 3 < 10 * n_params:
         raise RenderFitError(f"photo: only {int(use.sum())} pixels of the object can be fitted (needs at least "
                              f"{int(np.ceil(10 * n_params / 3))}); is the camera looking at the object?")
-    if sigma is None:
+    if sigma is None:  # a first, provisional noise of 5 % where it is estimated
+        relative = 0.05 if estimate else float(noise)
         floor = 0.01 * np.percentile(np.abs(photo[use]), 99, axis=0)
-        sigma = noise * np.maximum(np.abs(photo), np.maximum(floor, 1e-300))
+        sigma = relative * np.maximum(np.abs(photo), np.maximum(floor, 1e-300))
     sigma = np.broadcast_to(np.asarray(sigma, float), photo.shape)
     if not (np.isfinite(sigma[use]).all() and (sigma[use] > 0).all()):
         raise RenderFitError("sigma: every fitted pixel's standard error must be finite and > 0.")
@@ -477,10 +575,13 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
     if not (isinstance(block, int) and block >= 1):
         raise RenderFitError(f"block must be a positive integer; got {block!r}.")
     mask = use[..., None].astype(float)
-    block_variance = np.asarray(_block_sums(np.where(use[..., None], sigma, 0.0) ** 2, block))
     block_used = np.asarray(_block_sums(mask, block)) > 0
-    inverse_sigma = jnp.asarray(np.where(block_used, 1.0 / np.sqrt(np.where(block_used, block_variance, 1.0)), 0.0),
-                                dtype)
+
+    def whitening(sigma):
+        block_variance = np.asarray(_block_sums(np.where(use[..., None], sigma, 0.0) ** 2, block))
+        return jnp.asarray(np.where(block_used, 1.0 / np.sqrt(np.where(block_used, block_variance, 1.0)), 0.0), dtype)
+
+    inverse_sigma = whitening(sigma)
     target = jnp.asarray(np.where(use[..., None], photo, 0.0), dtype)
     mask = jnp.asarray(mask, dtype)
     notes, history, steps = [], [], 0
@@ -516,7 +617,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
             best = (model_b * photo_b * w2).sum() / max((model_b**2 * w2).sum(), 1e-300)
             theta = theta.at[6].set(jnp.log(jnp.asarray(max(best, 1e-300), dtype)))
         say(f"round {round_ + 1}: Levenberg-Marquardt on {int(use.sum())} pixels (the first solve compiles)")
-        residuals = _residual_fn(render, fit_gain, block, prior)
+        residuals = _residual_fn(render, fit_gain, block, prior, robust)
         exposure = jnp.asarray([held_gain or 1.0, np.log(held_gain or 1.0), 1.0 / gain_err if prior else 0.0], dtype)
         args = (data, target, mask, inverse_sigma, eta, exposure)
         theta, n_steps, solved, jac = _solve(residuals, theta, args, max_steps=max_steps,
@@ -552,9 +653,32 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
         history.append(f"re-planned for the estimate after round {round_ + 1}: " + ", ".join(changed))
         say(history[-1])
         fit_scene, plan = next_scene, next_plan
+    if estimate:  # the noise from the first fit's residuals, then the fit again with it
+        gain_now = float(np.exp(theta[6])) if fit_gain else held_gain
+        expected = gain_now * np.asarray(render(_medium(theta, eta), data))
+        sigma = estimate_noise(photo - expected, expected, use)
+        inverse_sigma = whitening(sigma)
+        args = (data, target, mask, inverse_sigma, eta, exposure)
+        say("the photo's noise estimated from the first fit's residuals: solving again with it")
+        theta, n_steps, solved, jac = _solve(residuals, theta, args, max_steps=max_steps, rtol=1e-8, atol=1e-10)
+        steps += int(n_steps)
+        level = np.median(expected[use], axis=0)
+        history.append("noise estimated from the photo (adjacent residuals): "
+                       + ", ".join(f"{c} {100 * s / max(v, 1e-300):.2g} %" for c, s, v in
+                                   zip("RGB", np.median(sigma[use], axis=0), level)) + " of the median pixel")
     r = np.asarray(residuals(theta, args))
     m = int(block_used.sum()) * 3 + int(prior)  # used tiles times channels, and the reference's gain
     chi2 = reduced_chi2(r @ r, m, n_params)
+    if robust:  # chi^2 from the median square (0.4549 for a unit Gaussian): 1 % of fireflies 3000
+        # errors off had made it 65 and every error 8x too wide, though the estimate was right
+        plain = np.asarray(_residual_fn(render, fit_gain, block, prior)(theta, args))
+        tiles = block_used.shape[:2] + (3,)
+        plain = plain[:int(np.prod(tiles))][np.broadcast_to(block_used, tiles).reshape(-1)]  # the fitted tiles
+        chi2 = float(np.median(plain**2) / 0.45494) * m / max(m - n_params, 1)
+        outliers = float(np.mean(np.abs(plain) > 5))
+        if outliers > 0.001:
+            notes.append(f"{100 * outliers:.2g} % of the fitted pixels lie beyond 5 standard errors (fireflies, hot "
+                         "pixels, or a part of the scene the model lacks); Huber's loss kept them from steering the fit")
     J = np.asarray(jac)
     if not (np.isfinite(r).all() and np.isfinite(J).all()):
         # A NaN from the renderer would otherwise surface as "eigenvalues did not converge".
@@ -604,4 +728,4 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise: float = 0.01, mask=Non
                      bool(solved) and not edge and not unresolved and bool(np.all(np.isfinite(theta_np)))
                      and bool(np.all(np.isfinite(rel))),
                      int(use.sum()), plan.method, profile_model,
-                     image * gain_value, use, tuple(notes), tuple(history))
+                     image * gain_value, use, tuple(notes), tuple(history), np.asarray(sigma))

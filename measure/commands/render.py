@@ -142,8 +142,12 @@ def _fit_parser(commands, methods):
     p.add_argument("--mask", default=None, help="image of the camera's size; pixels where it is 0 are not fitted")
     p.add_argument("--saturation", type=float, default=None,
                    help="pixel value at which the camera clipped; pixels at or above it are not fitted")
-    p.add_argument("--noise", type=float, default=0.01,
-                   help="relative noise of a pixel (default 0.01); the stated errors widen if the fit is worse")
+    p.add_argument("--noise", default="estimate",
+                   help="each pixel's noise: 'estimate' (default: read, shot and relative noise fitted to the "
+                        "residuals of a first fit) or a relative error, e.g. 0.01")
+    p.add_argument("--loss", choices=("huber", "squared"), default="huber",
+                   help="huber (default: pixels beyond 1.345 errors count linearly, so fireflies and hot pixels "
+                        "do not steer the fit) or squared (plain least squares)")
     p.add_argument("--profile", choices=("dipole", "transport"), default=None,
                    help="profile model (default: the scene's; transport is exact to radiative transfer)")
     p.add_argument("--g", type=float, default=None, help="Henyey-Greenstein g of the transport profile")
@@ -311,7 +315,7 @@ def _is_16bit_png(path) -> bool:
     return head[:8] == b"\x89PNG\r\n\x1a\n" and len(head) > 24 and head[24] == 16
 
 
-def _figure(photo, result, sigma_noise, path):
+def _figure(photo, result, path):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -322,8 +326,7 @@ def _figure(photo, result, sigma_noise, path):
 
     shown, exposure = tone_map(photo)
     fit, _ = tone_map(result.image, exposure=exposure)
-    level = np.maximum(np.abs(photo).mean(-1), 1e-300)
-    residual = np.where(result.mask, (result.image - photo).mean(-1) / (sigma_noise * level), np.nan)
+    residual = np.where(result.mask, ((result.image - photo) / result.sigma).mean(-1) * np.sqrt(3), np.nan)
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), constrained_layout=True)
     axes[0].imshow(shown)
     axes[0].set_title("photo")
@@ -340,8 +343,14 @@ def _figure(photo, result, sigma_noise, path):
 
 def _fit(args) -> int:
     say = Progress(args.prog, enabled=False if args.quiet else None)
-    if not (args.noise > 0):
-        raise UsageError(f"--noise must be > 0; got {args.noise}.")
+    noise = args.noise
+    if noise != "estimate":
+        try:
+            noise = float(noise)
+        except ValueError:
+            noise = math.nan
+        if not (math.isfinite(noise) and noise > 0):
+            raise UsageError(f"--noise must be 'estimate' or a relative error > 0 (0.01 for 1 %); got {args.noise}.")
     if not 0 < args.accuracy < 1:
         raise UsageError(f"--accuracy must lie in (0, 1); got {args.accuracy}.")
     start(spectra=True)
@@ -368,7 +377,7 @@ def _fit(args) -> int:
     method = None if args.method == "auto" else Method(args.method)
     gain, gain_err, exposure = _exposure(args, photo, say)
     t0 = time.perf_counter()
-    result = fit_render(scene, photo, noise=args.noise, mask=mask, saturation=args.saturation, method=method,
+    result = fit_render(scene, photo, noise=noise, loss=args.loss, mask=mask, saturation=args.saturation, method=method,
                         accuracy=args.accuracy, profile_model=args.profile, g=args.g, gain=gain, gain_err=gain_err,
                         specular=not args.no_specular, rim_mm=args.rim_mm,
                         progress=lambda line: say(f"{args.scene}: {line}"))
@@ -388,7 +397,7 @@ def _fit(args) -> int:
              out / f"{stem}.fit.toml": scene_with_material(Path(args.scene).read_text(), fitted)}
     for path, text in files.items():
         write_text(path, text)
-    figure = write_atomically(out / f"{stem}.fit.png", lambda tmp: _figure(photo, result, args.noise, tmp))
+    figure = write_atomically(out / f"{stem}.fit.png", lambda tmp: _figure(photo, result, tmp))
     for warning in result.warnings:
         print(f"{args.prog}: warning: {warning}", file=sys.stderr)
     if args.json:
