@@ -136,8 +136,8 @@ for warning in lambert.warnings:
 # noise. `benchmarks/inverse_rendering.py` fits photos made by a volumetric path tracer
 # (Mitsuba 3) instead, where nothing shares jsss's assumptions. There, with the exposure known,
 # the transport profile recovers R_d within 2 % and the mean free path within 15 % on the marble
-# sphere and the ketchup plane (README, 2026-12-02), after two effects the profiles leave out
-# were added to the renderer: light arriving at a slant returns more (Chandrasekhar's H
+# sphere and the ketchup plane (2026-12-02, docs/guides/inverse_rendering.md), after two effects
+# the profiles leave out were added to the renderer: light arriving at a slant returns more (Chandrasekhar's H
 # function, `jsss.diffusion.incidence`), and a nearby lamp's rays keep spreading below the surface. Two
 # things a photo cannot give you: R_d when the exposure is unknown (brightness is gain x R_d,
 # and only the profile's shape separates them), and the mean free path of a channel whose light

@@ -164,3 +164,29 @@ def test_the_rules_can_fail():
     edges = _graph()
     assert "jsss.diffusion.dipole" in set().union(*(edges[n] for n in edges if n.startswith("jsss.render")))
     assert any(t.startswith("fitting") for n in edges if n.startswith("measure") for t in edges[n])
+
+
+def test_every_package_ships():
+    """pyproject.toml lists its packages (examples/ ships inside jsss as jsss.examples, which a
+    find would not see): every folder of the three packages with an __init__.py is listed, and
+    every folder of examples/ that holds files is a listed jsss.examples package with package data,
+    so `pip install .` (not editable) installs what the tree has."""
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    listed = set(config["packages"])
+    in_tree = {".".join(path.parent.relative_to(ROOT).parts) for package in PACKAGES
+               for path in (ROOT / package).rglob("__init__.py")}
+    assert in_tree <= listed, sorted(in_tree - listed)
+    assert config["package-dir"] == {"jsss.examples": "examples"}
+    example_folders = {".".join(("jsss", "examples") + path.relative_to(ROOT / "examples").parts)
+                       for path in [ROOT / "examples", *(ROOT / "examples").rglob("*")]
+                       if path.is_dir() and "__pycache__" not in path.parts}
+    assert example_folders <= listed, sorted(example_folders - listed)
+    assert listed <= in_tree | example_folders, sorted(listed - in_tree - example_folders)
+    data = config["package-data"]
+    for folder in example_folders:
+        path = ROOT.joinpath("examples", *folder.split(".")[2:])
+        files = {p.name for p in path.iterdir() if p.is_file() and p.suffix != ".py"}
+        shipped = {name for name in files if any(Path(name).match(pattern) for pattern in data.get(folder, ()))}
+        assert shipped == files, f"{folder}: {sorted(files - shipped)} would not ship"

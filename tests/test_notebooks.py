@@ -1,5 +1,10 @@
-"""Every tutorial in notebooks/ is a jupytext percent script that runs top to bottom on a fresh kernel."""
+"""Every tutorial in notebooks/ is a jupytext percent script that runs top to bottom on a fresh kernel.
 
+Each executed notebook is also written to docs/_build/executed/ (git-ignored): the docs show
+the tutorials with these outputs (docs/conf.py), so the docs build never executes them again.
+"""
+
+import os
 from pathlib import Path
 
 import pytest
@@ -8,6 +13,7 @@ jupytext = pytest.importorskip("jupytext")
 nbclient = pytest.importorskip("nbclient")
 
 FOLDER = Path(__file__).parent.parent / "notebooks"
+EXECUTED = Path(__file__).parent.parent / "docs" / "_build" / "executed"
 NOTEBOOKS = sorted(p for p in FOLDER.glob("*.py") if not p.name.startswith("_"))
 
 
@@ -34,8 +40,10 @@ def test_notebook_is_a_percent_script(path):
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_executes(path, monkeypatch):
     """Build the notebook from its script with jupytext and execute it in notebooks/ with a
-    non-interactive matplotlib backend and the default (fast) settings."""
-    monkeypatch.setenv("MPLBACKEND", "Agg")
+    non-interactive matplotlib backend (Jupyter's inline one, which keeps the figures as
+    outputs) and the default (fast) settings."""
+    # Jupyter's inline backend: non-interactive like Agg, and the figures become the outputs the docs show
+    monkeypatch.setenv("MPLBACKEND", "module://matplotlib_inline.backend_inline")
     monkeypatch.delenv("JSSS_FULL", raising=False)  # the notebooks' default (fast) settings
     nb = jupytext.read(path)
     client = nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
@@ -44,3 +52,18 @@ def test_notebook_executes(path, monkeypatch):
     errors = [o for cell in nb.cells if cell.cell_type == "code" for o in cell.get("outputs", [])
               if o.get("output_type") == "error"]
     assert not errors, errors
+    _keep_for_the_docs(nb, path.stem)
+
+
+def _keep_for_the_docs(nb, name):
+    """Write the executed notebook where docs/conf.py reads it, atomically (a docs build may
+    read it at the same time); a read-only checkout just goes without."""
+    import nbformat
+
+    try:
+        EXECUTED.mkdir(parents=True, exist_ok=True)
+        partial = EXECUTED / f".{name}.{os.getpid()}.ipynb"
+        nbformat.write(nb, partial)
+        os.replace(partial, EXECUTED / f"{name}.ipynb")
+    except OSError:
+        pass
