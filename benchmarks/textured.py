@@ -20,7 +20,7 @@
    for each texturing rule (only pre-post is the walk's layer).
 
 ``--write`` writes the tables, dated, to docs/benchmarks/textured.md; ``--image PNG`` renders
-the README's picture of the textured examples (the veined marble under each texturing rule,
+the picture of the textured examples in docs/guides/rendering.md (the veined marble under each texturing rule,
 and the checker plane).
 """
 
@@ -188,7 +188,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="256^2 pixels and texels, 3 repeats")
     parser.add_argument("--write", action="store_true", help=f"write the tables to {os.path.relpath(DOCS, ROOT)}")
-    parser.add_argument("--image", metavar="PNG", help="render the README's picture of the textured examples")
+    parser.add_argument("--image", metavar="PNG", help="render the picture of the textured examples in docs/guides/rendering.md")
     args = parser.parse_args(argv)
     if args.image:
         _image(args.image)

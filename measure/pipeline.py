@@ -188,7 +188,7 @@ def fit_measurement(measurement, reference, pixel_mm: float, eta, *, dark=None, 
     marble its sigma_a came out 32-93 % low with chi2/dof 3e4); ``fit_options`` passes its solver options (``init``,
     ``n_starts``, ``max_steps``, ``rtol``, ``atol``).
 
-    The image contract (README): a pixel is proportional to the radiance toward the camera,
+    The image contract (docs/guides/image_contract.md): a pixel is proportional to the radiance toward the camera,
     which looks at the sample ``view_angle_deg`` from its normal (default 0, straight down;
     the image mapped to the sample plane so that ``pixel_mm`` holds); the beam arrives along
     the normal and loses its Fresnel reflection at entry; the reference is a Lambertian white.

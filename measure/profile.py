@@ -1,6 +1,6 @@
 r"""From calibrated beam-profile images to radial profiles (Jensen et al. 2001 sec. 3).
 
-The image contract (README): a measurement pixel is :math:`p_i = K\Phi R_d(r_i)`; the
+The image contract (docs/guides/image_contract.md): a measurement pixel is :math:`p_i = K\Phi R_d(r_i)`; the
 reference (a white diffuse reflector of total reflectance :math:`\rho_{ref}`, same beam and
 camera) sums to :math:`K\Phi\rho_{ref}/A` with :math:`A` the area of one pixel, so
 

@@ -49,11 +49,12 @@ examples:
   jsss-render examples/marble_sphere.toml -o marble.png --plan --timings
   jsss-render examples/ketchup_plane.toml --method image-space --samples 64
   jsss-render examples/*.toml -o renders/       (several scenes: -o is a directory)
-  jsss-render fit scene.toml photo.exr          (fit the material to a photo: jsss-render fit --help)
+  jsss-render example:head                       (a scene shipped with jsss, from any folder; example:list)
+  jsss-render fit scene.toml photo.exr --gain 1 (fit the material to a photo: jsss-render fit --help)
 
-The scene format (geometry, material, lights, camera, render) is described in the README,
-section "Scene files". A scene that fails is reported in one line; the others still render
-and the exit status is 2.
+The scene format (geometry, material, lights, camera, render) is described in the docs,
+docs/guides/scene_format.md. A scene that fails is reported in one line; the others still
+render and the exit status is 2.
 """
 
 _FIT_EPILOG = """\
@@ -121,7 +122,8 @@ def parser() -> argparse.ArgumentParser:
     options = _render_options(methods)
     formatting = dict(epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter, description=_DESCRIPTION)
     scenes = Parser(prog=PROG, parents=[options], **formatting)
-    scenes.add_argument("scenes", nargs="+", metavar="scene", help="TOML scene file(s) (see examples/)")
+    scenes.add_argument("scenes", nargs="+", metavar="scene",
+                        help="TOML scene file(s), or example:NAME for a scene shipped with jsss (example:list)")
     top = Parser(prog=PROG, parents=[options], **formatting)
     top.set_defaults(run=_render, prog=PROG)
     commands = add_commands(top, default=scenes, dest="command", required=True, metavar="scene ... | fit",
@@ -202,9 +204,44 @@ def _outputs(args) -> list[Path]:
     return [output / name for name in names]
 
 
+def shipped_examples() -> dict[str, Path]:
+    """The example scenes that ship with jsss (``jsss.examples``, the repository's examples/),
+    by name."""
+    try:
+        from importlib.resources import files
+
+        folder = Path(str(files("jsss.examples")))
+    except ModuleNotFoundError:  # an editable install made before examples shipped as jsss.examples
+        import jsss
+
+        folder = Path(jsss.__file__).resolve().parents[1] / "examples"
+    return {path.stem: path for path in sorted(folder.glob("*.toml"))}
+
+
+def _example_paths(scenes) -> list[str]:
+    """``example:NAME`` replaced by the shipped scene's path; ``example:list`` prints the names."""
+    out = []
+    for scene in scenes:
+        if not str(scene).startswith("example:"):
+            out.append(scene)
+            continue
+        name, examples = str(scene)[len("example:"):], shipped_examples()
+        if name == "list":
+            for stem, path in examples.items():
+                print(f"example:{stem:<16} {path}")
+            continue
+        if name not in examples:
+            raise UsageError(f"{scene}: no such example; one of {', '.join('example:' + n for n in examples)}")
+        out.append(str(examples[name]))
+    return out
+
+
 def _render(args) -> int:
     """Render every scene; a scene that fails is one line on stderr, the others still render
     (exit status 2 if any failed)."""
+    args.scenes = _example_paths(args.scenes)
+    if not args.scenes:  # example:list alone
+        return 0
     outputs = _outputs(args)
     say = Progress(PROG, enabled=False if args.quiet else None)
     start(spectra=True)  # planning fits profiles in float64; float32 frames unless --float64
@@ -366,6 +403,7 @@ def _fit(args) -> int:
                          f"got {args.saturation:g}")
     if Path(args.output).exists() and not Path(args.output).is_dir():
         raise UsageError(f"-o {args.output}: is a file; give a folder for the .fit.json, .fit.toml and .fit.png")
+    args.scene = (_example_paths([args.scene]) or [args.scene])[0]
     say(f"{args.scene}: loading the scene and the photo")
     scene = load_scene(args.scene, allow_outside=args.allow_outside_paths)
     photo = read_image(args.photo).pixels

@@ -456,3 +456,14 @@ def test_a_library_warning_is_one_line_naming_the_command(capsys):
     assert exit_status("jsss-render", command) == 0
     err = capsys.readouterr().err
     assert err == "jsss-render: warning: something to know\n"
+
+
+def test_shipped_examples_render_from_any_folder_by_name(tmp_path):
+    """example:NAME names a scene that ships with jsss (jsss.examples); example:list lists them;
+    an unknown name is one line, exit 2, listing the names."""
+    listing = subprocess.run([sys.executable, "-m", "measure.commands.render", "example:list"], capture_output=True,
+                             text=True, stdin=subprocess.DEVNULL, timeout=120, cwd=tmp_path)
+    assert listing.returncode == 0 and "example:head " in listing.stdout and "example:marble_sphere" in listing.stdout
+    bad = subprocess.run([sys.executable, "-m", "measure.commands.render", "example:nope"], capture_output=True,
+                         text=True, stdin=subprocess.DEVNULL, timeout=120, cwd=tmp_path)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "example:marble_sphere" in bad.stderr
