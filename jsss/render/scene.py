@@ -9,7 +9,7 @@ A scene file (lengths in mm, coefficients in 1/mm)::
                               # textures = true: its base-colour texture is the colour map)
 
     [material]
-    name = "marble"           # a Jensen 2001 material, or sigma_a/sigma_s_prime/eta,
+    name = "marble"           # a measured material (`jsss materials`), or sigma_a/sigma_s_prime/eta,
                               # or preset = "skin", or [[material.layers]] (+ [material.base]),
                               # or [material.gaussians] variances/weights/eta
     roughness = 0.35          # specular lobe (Beckmann m); specular = 0 turns it off
@@ -55,7 +55,7 @@ import numpy as np
 from .. import layers as _layers
 from .. import transport as _transport
 from ..gaussians.gaussian_sum import GaussianSum
-from ..materials import jensen2001, jensen2001_names
+from ..materials import material as _library_material
 from ..medium import Medium
 from . import budget
 from . import mesh as _mesh
@@ -393,9 +393,10 @@ def _material(t: _Table, source: str, base_dir: Path = Path("."), allow_outside:
     form = forms[0]
     if form == "name":
         name = t.string("name")
-        if name.lower() not in [n.lower() for n in jensen2001_names()]:
-            t.fail("name", f"unknown Jensen 2001 material {name!r}; one of {', '.join(jensen2001_names())}.")
-        medium = jensen2001(name)
+        try:  # a measured material of jsss.materials: Jensen 2001 or Narasimhan 2006
+            medium = _library_material(name)
+        except ValueError as error:
+            t.fail("name", str(error))
         material = Material(name, np.asarray(medium.eta), medium=medium, **surface)
     elif form == "sigma_a":
         medium = _medium(t)

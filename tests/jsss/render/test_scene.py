@@ -16,7 +16,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.a
 
 
 @pytest.mark.parametrize("change, message", [
-    (lambda d: d["material"].update(name="jade"), r"\[material\] name: unknown Jensen 2001 material 'jade'"),
+    (lambda d: d["material"].update(name="jade"), r"\[material\] name: unknown material 'jade'"),
     (lambda d: d.update(material={"sigma_a": [-0.1, 0, 0], "sigma_s_prime": 1.0}), r"sigma_a: must be >= 0"),
     (lambda d: d.update(material={"sigma_a": 0.1, "sigma_s_prime": 1.0, "eta": 0.0}), r"eta: must be > 0"),
     (lambda d: d["geometry"].update(radius=-1), r"\[geometry\] radius: must be > 0"),
