@@ -21,18 +21,29 @@ nothing in a beam-profile fit can tell g.
 
 What each drops
 ---------------
-- All three: layers (a homogeneous medium only), the surface's specular roughness, and the
+Measured in ``docs/benchmarks/exports.md`` (``benchmarks/exports.py``: a thick slab of marble,
+ketchup and skin1 in a white environment, against F(0) + (1 - F(0)) R_d of the transport
+tables): Mitsuba within 0.5 %, Cycles within 0.2 % in all nine channels.
+
+- All three: layers (a homogeneous medium only: export a stack's effective medium, which
+  keeps its total but not its profile), the surface's specular roughness, and the
   Fresnel-weighted glint the camera saw (none is fitted from a beam profile).
-- Mitsuba 3 (``homogeneous`` medium inside a ``dielectric``): nothing of the medium; use the
-  ``volpathmis`` integrator for media whose extinction differs between channels (plain
-  ``volpath`` samples distances with one channel's extinction, and the weight of a channel
-  with lower extinction has infinite variance: see ``benchmarks/transport_truth.py``).
+- Mitsuba 3 (``homogeneous`` medium inside a ``dielectric``): nothing of the medium, g
+  included; use the ``volpathmis`` integrator for media whose extinction differs between
+  channels (plain ``volpath`` samples distances with one channel's extinction, and the weight
+  of a channel with lower extinction has infinite variance: see
+  ``benchmarks/transport_truth.py``), and keep its Russian roulette away from the light that
+  matters (``rr_depth`` 10^4: from depth 1000 it returned marble 0.9 % too dark).
 - pbrt-v4 (``subsurface`` material): pbrt evaluates photon beam diffusion from sigma_a,
-  sigma_s, g and eta, a diffusion model with its own near-source error.
-- Blender Cycles (Principled BSDF, random-walk subsurface): Cycles parameterises the medium
-  by a colour A and a radius d (:func:`blender_principled`); single-scattering albedos below
-  0.2 are raised to 0.2 by Cycles with the throughput scaled down to compensate (ketchup's
-  green and blue), and after 9 bounces it switches to the similar isotropic medium.
+  sigma_s, g and eta, a diffusion model with its own near-source error (not rendered here).
+- Blender Cycles (Principled BSDF, random-walk subsurface, roughness 0): Cycles'
+  walk has no internal Fresnel reflection, stops at 256 bounces, raises albedos below 0.2
+  and turns isotropic after 9 bounces (:mod:`measure.cycles_walk`). The export gives it the
+  medium's mean free path and a colour that makes its walk return the medium's *total*
+  reflectance (:func:`blender_principled`), so a thick piece is as bright as the medium;
+  it drops the profile's shape (Cycles' albedo is not the medium's: light spreads
+  differently, and thin parts and edges differ) and g beyond Cycles' own walk (with
+  g = 0.8 the total is within 2 % except skin's red, 3.5 % bright).
 """
 
 from __future__ import annotations
@@ -40,6 +51,8 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+
+from . import cycles_walk
 
 __all__ = ["blender_principled", "blender_python", "cycles_albedo_from_colour", "cycles_colour_from_albedo",
            "mitsuba_dict", "mitsuba_xml", "pbrt_material", "scattering_coefficients"]
@@ -190,47 +203,8 @@ def pbrt_material(medium, *, g=0.0, unit_mm=1.0, name="jsss"):
 
 
 # ----------------------------------------------------------------------------- Blender Cycles
-def _cycles_fit_terms(g):
-    """Cycles' fit (``subsurface_random_walk_remap``, after Chiang et al. 2016 and Wrenninge
-    et al. for g) of single-scattering albedo against its colour A: six terms in g."""
-    p = g ** np.arange(8)
-    a = p @ [1.8260523782, -1.28451056436, -1.79904629312, 9.19393289202, -22.8215585862, 32.0234874259,
-             -23.6264803333, 7.21067002658]
-    b = 4.98511194385 + 0.127355959438 * np.exp(p[1:] @ [31.1491581433, -201.847017512, 841.576016723,
-                                                         -2018.09288505, 2731.71560286, -1935.41424244, 559.009054474])
-    c = p @ [1.09686102424, -0.394704063468, 1.05258115941, -8.83963712726, 28.8643230661, -46.8802913581,
-             38.5402837518, -12.7181042538]
-    d = p @ [0.496310210422, 0.360146581622, -2.15139309747, 17.8896899217, -55.2984010333, 82.065982243,
-             -58.5106008578, 15.8478295021]
-    e = 4.23190299701 + 0.00310603949088 * np.exp(p[1:] @ [76.7316253952, -594.356773233, 2448.8834203,
-                                                           -5576.68528998, 7116.60171912, -4763.54467887, 1303.5318055])
-    f = p @ [2.40602999408, -2.51814844609, 9.18494908356, -79.2191708682, 259.082868209, -403.613804597,
-             302.85712436, -87.4370473567]
-    return a, b, c, d, e, f
-
-
-def cycles_albedo_from_colour(colour, g=0.0):
-    """Cycles' single-scattering albedo for a random-walk colour A in [0, 1] (its forward map)."""
-    a, b, c, d, e, f = _cycles_fit_terms(float(g))
-    colour = np.clip(np.asarray(colour, dtype=float), 0.0, 1.0)
-    blend = colour ** 0.25
-    alpha = (1 - blend) * a * np.arctan(b * colour) ** c + blend * d * np.arctan(e * colour) ** f
-    return np.clip(alpha, 0.0, 0.999999)
-
-
-def cycles_colour_from_albedo(alpha, g=0.0):
-    """The colour A that Cycles maps to single-scattering albedo ``alpha`` (bisection, 1e-12).
-
-    The forward map rises from 0 at A = 0 to Cycles' clamp 0.999999 (reached at A = 0.918 for
-    g = 0, lower for larger g); an albedo at the clamp gives the smallest A that reaches it.
-    """
-    alpha = np.asarray(alpha, dtype=float)
-    lo, hi = np.zeros_like(alpha), np.ones_like(alpha)
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        below = cycles_albedo_from_colour(mid, g) < alpha
-        lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
-    return hi
+cycles_albedo_from_colour = cycles_walk.albedo_from_colour
+cycles_colour_from_albedo = cycles_walk.colour_from_albedo
 
 
 CYCLES_RADIUS_SCALE = 4 * np.pi  # Cycles multiplies a random walk's radius by 0.25 / pi (bssrdf_setup_radius)
@@ -239,46 +213,91 @@ CYCLES_RADIUS_SCALE = 4 * np.pi  # Cycles multiplies a random walk's radius by 0
 def blender_principled(medium, *, g=0.0, unit_mm=1.0):
     r"""Principled BSDF inputs for Cycles' random-walk subsurface scattering.
 
-    Cycles first scales the radius R (``Subsurface Radius`` x ``Subsurface Scale``, scene
-    units) by :math:`1/4\pi` "so it gives similar looking result to older Cubic, Gaussian and
-    Burley models" (``bssrdf_setup_radius`` in ``kernel/closure/bssrdf.h``, read in the sources
-    the bpy 4.5.15 wheel ships), then turns the colour A and :math:`d = R / 4\pi` into
-    :math:`\sigma_t = 1 / (d (1 - g))` and a single-scattering albedo :math:`\alpha = f_g(A)`
-    (``kernel/integrator/subsurface_random_walk.h``). Inverting that for our medium, with
-    :math:`\sigma_s = \sigma_s' / (1 - g)` and :math:`\sigma_t = \sigma_a + \sigma_s`:
+    **Radius: the medium's mean free path.** Cycles first scales the radius R (``Subsurface
+    Radius`` x ``Subsurface Scale``, scene units) by :math:`1/4\pi` "so it gives similar looking
+    result to older Cubic, Gaussian and Burley models" (``bssrdf_setup_radius`` in
+    ``kernel/closure/bssrdf.h``, read in the sources the bpy 4.5.15 wheel ships), then turns
+    the colour A and :math:`d = R / 4\pi` into :math:`\sigma_t = 1 / (d (1 - g))` and a
+    single-scattering albedo :math:`\alpha_c = f_g(A)` (``subsurface_random_walk.h``). So
 
     .. math::
 
-        R = \frac{4\pi}{(1 - g)\,\sigma_t} = \frac{4\pi}{(1 - g)\,\sigma_a + \sigma_s'}, \qquad
-        A = f_g^{-1}\!\left(\frac{\sigma_s}{\sigma_t}\right).
+        R = \frac{4\pi}{(1 - g)\,\sigma_t} = \frac{4\pi}{(1 - g)\,\sigma_a + \sigma_s'}
 
-    With g = 0, R is 4 pi transport mean free paths. (Until 2026-12-04 the export left out the
-    4 pi: Cycles rendered the material with a mean free path 12.6 times too short, +4 to +123 %
-    bright against F0 + T0 R_d in a white furnace; a half-shadow edge and a 1 mm slab over
-    black measured a best-fit scale of 12.75.) A is Cycles' own
-    parameter, not the material's diffuse reflectance: at eta = 1, g = 0 the transport
-    tables' total reflectance is 0.77 A at A = 0.05 and 1.05 A at A = 0.95.
+    (with g = 0, 4 pi transport mean free paths) gives Cycles the medium's extinction.
+
+    **Colour: the medium's total reflectance.** Cycles' walk is not the medium's: it has no
+    internal Fresnel reflection, stops at 256 bounces and raises albedos below 0.2
+    (:mod:`measure.cycles_walk`). Given the medium's own albedo it renders marble 4 % and
+    skin 10-20 % too bright. The colour is chosen instead so that Cycles' walk returns the
+    medium's total diffuse reflectance :math:`R_d` (per unit entering flux, exact to transport:
+    :func:`jsss.transport.total_reflectance` at the medium's eta and g):
+
+    .. math::
+
+        A = f_g^{-1}(\alpha_c), \qquad R_c(\alpha_c) = R_d(\eta),
+
+    with :math:`R_c` the model of Cycles' walk (:func:`measure.cycles_walk.walk_reflectance`).
+    A flat, thick piece then looks right in Cycles under any smooth lighting: at normal view
+    in a white environment it shows :math:`F(0) + (1 - F(0)) R_d`, as the medium does
+    (``benchmarks/exports.py`` measures within 1 % for marble, ketchup, skin1). What it
+    cannot match: the profile's shape (how far light spreads, thin parts, edges), since
+    :math:`\alpha_c` differs from the medium's :math:`\sigma_s/\sigma_t` and only the total
+    and the mean free path agree. Where the tables do not hold the medium's g, :math:`R_d`
+    is the g = 0 table's (similarity); outside their eta range (1.0-1.6), the nearest eta's
+    (a warning says so).
+
+    (Until 2026-12-04 the export left out the 4 pi, +4 to +123 % bright against F0 + T0 R_d;
+    a half-shadow edge and a 1 mm slab over black measured a best-fit scale of 12.75; and it
+    gave A for the medium's own albedo.)
 
     Returns
     -------
     dict with ``base_color`` (3 floats), ``subsurface_radius`` (3 floats, scene units,
     with ``subsurface_scale = 1``), ``subsurface_scale``, ``subsurface_anisotropy`` (g),
-    ``ior`` (eta), ``subsurface_weight`` (1) and ``subsurface_method`` ("RANDOM_WALK").
+    ``ior`` (eta), ``roughness`` (0: the smooth surface jsss models), ``subsurface_weight``
+    (1), ``subsurface_method`` ("RANDOM_WALK") and ``total_reflectance`` (the :math:`R_d`
+    matched, 3 floats).
     """
     sigma_a, sigma_s, eta = scattering_coefficients(medium, g=g, unit_mm=unit_mm)
     sigma_t = np.asarray(_rgb(sigma_a + sigma_s))
     if not np.all(sigma_t > 0):
         raise ValueError("a channel without extinction (sigma_a = sigma_s' = 0) has no Cycles radius.")
-    alpha = np.asarray(_rgb(sigma_s)) / sigma_t
-    reachable = float(cycles_albedo_from_colour(1.0, g))
-    if np.any(alpha > reachable):
-        warnings.warn(f"single-scattering albedo {alpha.max():.7f} is above the {reachable:.7f} that Cycles' colour "
-                      "fit reaches; its colour is clamped there (a slightly darker material)", stacklevel=2)
-    colour = cycles_colour_from_albedo(np.minimum(alpha, reachable), g)
+    target = _total_reflectance(medium, float(g), eta)
+    alpha, reachable = cycles_walk.albedo_for_reflectance(target, g)
+    if not np.all(reachable):
+        warnings.warn(f"total reflectance {target.max():.4f} is above the {cycles_walk.walk_reflectance(1.0, g):.4f} "
+                      "that Cycles' walk returns at its largest albedo (its 256-bounce cap loses the rest); "
+                      "the colour is clamped there (a darker material)", stacklevel=2)
+    colour = cycles_colour_from_albedo(alpha, g)
     radius = CYCLES_RADIUS_SCALE / ((1.0 - float(g)) * sigma_t)
     return {"base_color": colour.tolist(), "subsurface_radius": radius.tolist(), "subsurface_scale": 1.0,
-            "subsurface_anisotropy": float(g), "ior": eta, "subsurface_weight": 1.0,
-            "subsurface_method": "RANDOM_WALK"}
+            "subsurface_anisotropy": float(g), "ior": eta, "roughness": 0.0, "subsurface_weight": 1.0,
+            "subsurface_method": "RANDOM_WALK", "total_reflectance": target.tolist()}
+
+
+def _total_reflectance(medium, g, eta):
+    """R_d per unit entering flux from the transport tables (3 channels), at the nearest
+    tabulated eta and with g = 0 where g is not tabulated (similarity)."""
+    from jsss import Medium, transport
+
+    info = transport.table_info()
+    low, high = float(info["etas"][0]), float(info["etas"][-1])
+    if not low <= eta <= high:
+        warnings.warn(f"eta {eta:g} is outside the transport tables ({low:g}-{high:g}); Cycles' colour matches "
+                      f"the total reflectance at eta {min(max(eta, low), high):g}", stacklevel=3)
+    if not np.any(np.isclose(info["gs"], g, atol=1e-9)):
+        g = 0.0
+    sigma_a = np.asarray(_rgb(medium.sigma_a), float)
+    sigma_s_prime = np.asarray(_rgb(medium.sigma_s_prime), float)
+    # Below the tables' reduced albedo 0.001 (a clear liquid's channel, sigma_s' = 0 included)
+    # light returns after one scattering: R_d is proportional to the albedo, from the last node.
+    last = float(info["absorption"][-1]) * (1 - 1e-6)  # the last node, inside it in float32 too
+    reduced, floor = sigma_s_prime / (sigma_a + sigma_s_prime), 1.0 / (1.0 + last)
+    clear = reduced < floor
+    tabulated = Medium(np.where(clear, last, sigma_a), np.where(clear, 1.0, sigma_s_prime), min(max(eta, low), high))
+    total = np.asarray(transport.total_reflectance(tabulated, g=g), float)
+    return np.where(clear, total * reduced / floor, total)
 
 
 def blender_python(medium, *, g=0.0, unit_mm=1.0, name="jsss"):
@@ -288,8 +307,15 @@ def blender_python(medium, *, g=0.0, unit_mm=1.0, name="jsss"):
     the active object when there is one.
     """
     p = blender_principled(medium, g=g, unit_mm=unit_mm)
+    rd = ", ".join(f"{v:.4f}" for v in p["total_reflectance"])
     return (f"# jsss: Cycles random-walk subsurface; radius in scene units of {float(unit_mm):g} mm; "
             f"g = {float(g):g}, eta = {p['ior']:.6g}\n"
+            "# Radius: 4 pi mean free paths (Cycles divides it by 4 pi): Cycles' extinction is the medium's.\n"
+            "# Base Color: chosen so that Cycles' walk (no internal reflection, 256 bounces at most, albedo\n"
+            "# >= 0.2) returns the medium's total diffuse reflectance, not for the medium's albedo:\n"
+            f"# R_d = ({rd}). A thick piece's brightness is right; the profile's shape (spread,\n"
+            "# thin parts, edges) is Cycles' own. Dropped: layers, g beyond Cycles' walk (isotropic after\n"
+            "# 9 bounces). Keep Roughness 0 and Specular IOR Level 0.5: the colour assumes that surface.\n"
             "import bpy\n"
             f"material = bpy.data.materials.new({name!r})\n"
             "material.use_nodes = True\n"
@@ -301,5 +327,6 @@ def blender_python(medium, *, g=0.0, unit_mm=1.0, name="jsss"):
             "node.inputs['Subsurface Scale'].default_value = 1.0\n"
             f"node.inputs['Subsurface Anisotropy'].default_value = {p['subsurface_anisotropy']:.9g}\n"
             f"node.inputs['IOR'].default_value = {p['ior']:.9g}\n"
+            "node.inputs['Roughness'].default_value = 0.0  # the smooth surface the colour was chosen for\n"
             "if bpy.context.active_object is not None:\n"
             "    bpy.context.active_object.active_material = material\n")
