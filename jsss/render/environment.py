@@ -274,6 +274,10 @@ class EnvironmentGeometry(NamedTuple):
     cell_directions: np.ndarray
     cell_power: np.ndarray
 
+    # Read in NumPy by the camera pass (see astype): constants of a compiled frame, not its
+    # arguments (jsss.render.programs).
+    static_fields = ("radiance", "rotation")
+
     def astype(self, dtype) -> EnvironmentGeometry:
         """Floats as ``jnp`` arrays of ``dtype``; the corner indices stay integers (and NumPy: the
         camera pass reads the map at the view's mirror direction in NumPy)."""

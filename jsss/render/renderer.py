@@ -7,12 +7,19 @@ shadow maps, the camera's visibility), and the method's stages are a pure JAX fu
 :class:`RenderParams` -- the material's Gaussian weights and variances and the lights'
 radiant colours -- so ``jit`` and ``grad`` go through them. :func:`render` is the
 convenience that does both and can time each stage.
+
+Warm frames cost their passes: the geometry's rasters, texels and shadow maps are kept while
+the mesh, the camera and the lights' positions stay (:mod:`jsss.render.memory`), and the
+compiled frame takes the geometry's arrays as arguments, so one program serves every frame of
+the same layout (:mod:`jsss.render.programs`, :func:`frame_program`).
+:func:`jsss.render.prepare_renderer` readies a scene for a loop over materials or intensities.
 """
 
 from __future__ import annotations
 
 import functools
 import time
+import weakref
 from dataclasses import dataclass
 
 import equinox as eqx
@@ -21,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..medium import Medium
+from . import programs
 from .image_space import SampledProfile
 from .methods import PixelPrepared, TexturePrepared
 from .passes import Pass
@@ -29,7 +37,8 @@ from .profiles import render_profile
 from .scene import Scene
 from .surface_maps import MapParams
 
-__all__ = ["RenderParams", "RenderResult", "frame_program", "prepare", "render", "render_image", "render_params"]
+__all__ = ["FrameProgram", "RenderParams", "RenderResult", "frame_program", "light_radiant", "prepare", "render",
+           "render_image", "render_params"]
 
 
 class RenderParams(eqx.Module):
@@ -90,13 +99,38 @@ def map_params(scene: Scene, plan: Plan, total, dtype) -> MapParams | None:
     return MapParams(**fields)
 
 
+def light_radiant(lights, dtype=jnp.float32):
+    """(L, 3) each light's colour times its intensity, in ``dtype`` (:attr:`RenderParams.radiant`)."""
+    return jnp.asarray(np.array([np.asarray(light.color) * light.intensity for light in lights]), dtype)
+
+
+_profiles: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # material -> {(variances, x64): GaussianSum}
+
+
+def _scene_profile(material, variances):
+    """:func:`jsss.render.profiles.render_profile` of a material (a frozen object: its profile
+    does not change) on ``variances``, fitted once per material and variances: a warm frame of
+    a small object would otherwise spend a tenth of its time refitting it."""
+    variances = np.asarray(variances)
+    key = (variances.dtype.str, variances.tobytes(), bool(jax.config.jax_enable_x64))
+    known = _profiles.setdefault(material, {})
+    if key not in known:
+        if len(known) >= 8:
+            known.pop(next(iter(known)))
+        known[key] = render_profile(material, variances)
+    return known[key]
+
+
 def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, radii=None) -> RenderParams:
     """Parameters of ``scene`` under ``plan``; ``medium`` replaces a homogeneous material's medium
     (pass a traced one to differentiate with respect to sigma_a, sigma_s' or eta). ``radii``
     [mm], where the render profile is fitted (default: from the scene's own profile), must
     be given when this runs under ``jit``."""
-    gs = render_profile(scene.material, plan.variances, medium=medium, radii=radii)
-    radiant = np.array([np.asarray(l.color) * l.intensity for l in scene.lights])
+    if medium is None and radii is None:
+        gs = _scene_profile(scene.material, plan.variances)
+    else:
+        gs = render_profile(scene.material, plan.variances, medium=medium, radii=radii)
+    radiant = light_radiant(scene.lights, dtype)
     eta = scene.material.eta if medium is None else medium.eta
     eta = jnp.broadcast_to(jnp.asarray(eta), (3,))
     weights, variances = jnp.asarray(gs.weights, dtype), jnp.asarray(gs.variances, dtype)
@@ -116,7 +150,7 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
         profile = SampledProfile(weights=weights, variances=variances)
     oblique = medium if medium is not None and plan.on(Pass.OBLIQUE_INCIDENCE) else None
     deposit = medium if medium is not None and plan.on(Pass.DEPOSIT_DEPTH) else None
-    return RenderParams(weights, variances, jnp.asarray(radiant, dtype), eta.astype(dtype), profile, medium, oblique,
+    return RenderParams(weights, variances, radiant, eta.astype(dtype), profile, medium, oblique,
                         deposit, map_params(scene, plan, total, dtype))
 
 
@@ -152,29 +186,64 @@ def _timed(fn, *args, repeats: int):
     return out, float(np.median(best))
 
 
-FRAME_PROGRAMS = 4  # compiled frames kept, the most recently used
+FRAME_PROGRAMS = 4  # prepared geometries whose frames are kept ready (with their arrays on the device)
+
+
+class FrameProgram:
+    """A compiled frame bound to one prepared geometry: ``program(params) -> radiance``.
+
+    The program itself is shared by every prepared geometry of the same layout
+    (:func:`jsss.render.programs.frame`: the geometry's arrays are its arguments, not its
+    constants); this object holds the arrays, moved to the device once.
+    """
+
+    def __init__(self, method, prepared):
+        self.layout, self._arrays = programs.split(prepared)
+        self.program = programs.frame(method, self.layout)
+        self._device: dict = {}  # x64 on or off -> the arrays as jnp (float64 becomes float32 when off)
+
+    def arrays(self) -> tuple:
+        """The geometry's arrays as the program reads them."""
+        x64 = bool(jax.config.jax_enable_x64)
+        if x64 not in self._device:
+            self._device[x64] = tuple(jnp.asarray(a) for a in self._arrays)
+        return self._device[x64]
+
+    def __call__(self, params: RenderParams):
+        return self.program(params, self.arrays())
+
+    def _cache_size(self) -> int:
+        """Traces of the shared program (one per dtype of the parameters)."""
+        return self.program._cache_size()
 
 
 @functools.lru_cache(maxsize=FRAME_PROGRAMS)
-def frame_program(method, prepared):
-    """The jitted frame ``params -> radiance`` of a method configuration and its prepared geometry.
+def frame_program(method, prepared) -> FrameProgram:
+    """The compiled frame ``params -> radiance`` of a method configuration and its prepared geometry.
 
     Kept for the last ``FRAME_PROGRAMS`` pairs: both compare by value (a configuration by its
     knobs, a prepared geometry by a digest of its data), so rendering a scene and plan again
-    prepares them again but neither traces nor compiles (the geometry stays a constant of the
-    program, as in a frame compiled afresh: the same numbers to the last bit).
+    prepares them again (from the kept geometry, :mod:`jsss.render.memory`) but neither traces
+    nor compiles. Another geometry of the same layout -- a light or the camera moved, another
+    material -- runs the same compiled program (:mod:`jsss.render.programs`).
     """
-    return jax.jit(lambda params: method.radiance(params, prepared))
+    return FrameProgram(method, prepared)
 
 
 def render(scene: Scene, plan: Plan | None = None, *, dtype=jnp.float32, time_passes: bool = False,
            repeats: int = 3) -> RenderResult:
     """Plan (unless given), prepare and render ``scene``.
 
-    With ``time_passes`` every stage of the method is compiled first and timed (median of
-    ``repeats``); otherwise the whole frame runs as one jitted function, compiled once for the
-    method's configuration and the prepared geometry (:func:`frame_program`): a frame of the
-    same scene and plan again does not recompile.
+    The frame runs as one jitted function, compiled once per method configuration and layout of
+    the prepared geometry (:func:`frame_program`): a frame of the same scene again, or with
+    other light intensities, another material, a light or the camera moved, does not
+    recompile; the rasters, texels and shadow maps are kept while the mesh, the camera and the
+    lights' positions stay (:mod:`jsss.render.memory`). For a loop over materials or light
+    intensities, :func:`prepare_renderer` also skips planning and preparing.
+
+    With ``time_passes`` every stage of the method is compiled (once, kept likewise) and timed,
+    the median of ``repeats``; ``timings`` then holds the geometry's passes as this call
+    prepared them (near 0 where the geometry was kept) and each JAX stage.
     """
     timings: dict = {}
     if plan is None:
@@ -184,13 +253,14 @@ def render(scene: Scene, plan: Plan | None = None, *, dtype=jnp.float32, time_pa
     method = plan.method_config
     params = render_params(scene, plan, dtype=dtype)
     prepared = method.prepare(scene, plan, params, timings=timings)
+    frame = frame_program(method, prepared)
     if not time_passes:
-        frame = frame_program(method, prepared)
         t0 = time.perf_counter()
         radiance = np.asarray(frame(params))
         timings["frame (with compile)"] = time.perf_counter() - t0
         return RenderResult(radiance, plan, timings, prepared)
     out = None
-    for name, stage in method.stages(prepared):
-        out, timings[name] = _timed(jax.jit(stage), params, out, repeats=repeats)
+    for index, (name, _) in enumerate(method.stages(prepared)):
+        out, timings[name] = _timed(programs.stage(method, frame.layout, index), params, out, frame.arrays(),
+                                    repeats=repeats)
     return RenderResult(np.asarray(out), plan, timings, prepared)

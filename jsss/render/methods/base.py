@@ -23,7 +23,10 @@ whichever it is through this interface:
     (pixels or texels), which the calibration's frame time scales with.
 
 A prepared geometry (:class:`PreparedGeometry`) compares by the data it holds, so one compiled
-frame serves a scene prepared again (:func:`jsss.render.frame_program`).
+frame serves a scene prepared again (:func:`jsss.render.frame_program`). Its expensive parts
+(rasters, texels, shadow maps, the lights at them) are kept between frames while the mesh,
+the camera and the lights' positions are the same (:func:`kept_camera`, :func:`kept_shadow_maps`,
+:func:`kept_lights`; :mod:`jsss.render.memory`), so preparing a frame again costs milliseconds.
 
 All methods end in :func:`camera_radiance`: the diffusion exitance :math:`M` of each pixel
 spread by the exit lobe, single scattering taking its share, plus the specular lobe, times
@@ -33,9 +36,7 @@ the pixel's coverage (:func:`jsss.render.shading.frame_radiance`).
 from __future__ import annotations
 
 import abc
-import dataclasses
 import functools
-import hashlib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
@@ -45,7 +46,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ...fresnel import exit_lobe
-from ..lighting import irradiance, node_irradiance
+from ..environment import EnvironmentGeometry
+from ..image_space import camera_buffers
+from ..lighting import irradiance, light_geometry, node_irradiance, shadow_map
+from ..memory import camera_key, digest, kept, light_key, mesh_key
 from ..passes import Method, Pass
 from ..raster import surface_attributes
 from ..shading import frame_radiance, single_scattering, specular_radiance
@@ -57,35 +61,32 @@ if TYPE_CHECKING:
     from ..scene import Scene
 
 __all__ = ["PixelShading", "PreparedGeometry", "RenderMethod", "camera_parts", "camera_radiance", "entry_irradiance",
-           "pixel_shading"]
+           "kept_camera", "kept_lights", "kept_shadow_maps", "pixel_shading"]
 
 
-def _feed(digest, value) -> None:
-    """Add ``value`` (arrays, scalars, tuples, dataclasses, plain objects, nested) to ``digest``."""
-    if isinstance(value, (np.ndarray, np.generic)):
-        value = np.ascontiguousarray(value)
-        digest.update(f"array {value.dtype.str} {value.shape};".encode())
-        digest.update(value.tobytes())
-    elif value is None or isinstance(value, (bool, int, float, str, complex)):
-        digest.update(f"{type(value).__name__} {value!r};".encode())
-    elif isinstance(value, (tuple, list)):
-        digest.update(f"{type(value).__name__} {len(value)}(".encode())
-        for item in value:
-            _feed(digest, item)
-        digest.update(b")")
-    elif dataclasses.is_dataclass(value):
-        digest.update(f"{type(value).__qualname__}(".encode())
-        for field in dataclasses.fields(value):
-            _feed(digest, getattr(value, field.name))
-        digest.update(b")")
-    elif hasattr(value, "__dict__"):
-        digest.update(f"{type(value).__qualname__}(".encode())
-        for name, item in sorted(vars(value).items()):
-            digest.update(f"{name}=".encode())
-            _feed(digest, item)
-        digest.update(b")")
-    else:
-        raise TypeError(f"cannot digest a {type(value).__name__} in prepared geometry.")
+def kept_camera(scene: Scene):
+    """The camera's G-buffer of ``scene`` (:func:`jsss.render.camera_buffers`), kept while the mesh
+    and the camera are the same (:mod:`jsss.render.memory`)."""
+    return kept("camera buffers", (mesh_key(scene.mesh), camera_key(scene.camera)),
+                lambda: camera_buffers(scene.mesh, scene.camera))
+
+
+def kept_shadow_maps(scene: Scene) -> list:
+    """Each light's shadow map (:func:`jsss.render.lighting.shadow_map`), kept while the mesh, the
+    light's position (direction, map) and the map's size are the same."""
+    mesh, size = scene.mesh, scene.shadow_map_size
+    return [kept("shadow map", (mesh_key(mesh), light_key(light), size),
+                 functools.partial(shadow_map, mesh, light, size=size)) for light in scene.lights]
+
+
+def kept_lights(scene: Scene, where, positions, normals, valid, maps) -> tuple:
+    """Each light's :class:`~jsss.render.lighting.LightGeometry` at the points ``positions``,
+    ``normals``, ``valid`` (from the kept texels or camera buffers that ``where`` names, a
+    digest or tuple of the inputs they come from), against its shadow map of ``maps``."""
+    mesh_id, size = mesh_key(scene.mesh), scene.shadow_map_size
+    return tuple(kept("light geometry", (where, mesh_id, light_key(light), size),
+                      functools.partial(light_geometry, positions, normals, valid, light, m))
+                 for light, m in zip(scene.lights, maps, strict=True))
 
 
 class PreparedGeometry:
@@ -95,10 +96,10 @@ class PreparedGeometry:
 
     @functools.cached_property
     def digest(self) -> str:
-        """BLAKE2 digest of the data (computed once)."""
-        digest = hashlib.blake2b(digest_size=20)
-        _feed(digest, self)
-        return digest.hexdigest()
+        """BLAKE2 digest of the data (computed once; the kept geometry's arrays are read-only and
+        their digests remembered, :mod:`jsss.render.memory`, so a frame prepared again from them
+        is digested in milliseconds)."""
+        return digest(self)
 
     def __eq__(self, other) -> bool:
         return type(other) is type(self) and other.digest == self.digest
@@ -135,6 +136,15 @@ class PixelShading:
     colour_map: MapSampler | None = None
     coefficient_map: MapSampler | None = None
 
+    @property
+    def static_fields(self) -> tuple:
+        """An environment's specular lobe reads the normals and view directions in NumPy
+        (:func:`jsss.render.environment.environment_specular`): then they are constants of the
+        compiled frame, not its arguments (:mod:`jsss.render.programs`)."""
+        if self.specular and any(isinstance(g, EnvironmentGeometry) for g in self.lights):
+            return ("normal", "view")
+        return ()
+
 
 def pixel_shading(scene: Scene, plan: Plan, buffers, lights) -> PixelShading:
     """The camera pass's data for ``scene`` under ``plan``, from the camera's G-buffer and the lights at it."""
@@ -142,13 +152,18 @@ def pixel_shading(scene: Scene, plan: Plan, buffers, lights) -> PixelShading:
     colour_map = coefficient_map = None
     maps = material.maps
     if maps is not None:
-        uv = surface_attributes(buffers.raster, scene.mesh.faces, scene.mesh.uvs)
-        wrap = scene.mesh.wrap_u
+        wrap, at = scene.mesh.wrap_u, (mesh_key(scene.mesh), camera_key(scene.camera))
+
+        def sampler(shape, nearest):  # kept while the mesh, camera and map size stay
+            return kept("pixel map sampler", (at, shape, nearest), lambda: MapSampler.at(
+                surface_attributes(buffers.raster, scene.mesh.faces, scene.mesh.uvs), shape, wrap_u=wrap,
+                nearest=nearest))
+
         if maps.colour is not None:
-            colour_map = MapSampler.at(uv, maps.colour.shape[:2], wrap_u=wrap)
+            colour_map = sampler(maps.colour.shape[:2], False)
         if maps.parametric:
             # Each map texel is one medium (surface_maps.crossing_light says why)
-            coefficient_map = MapSampler.at(uv, maps.sigma_a.shape[:2], wrap_u=wrap, nearest=True)
+            coefficient_map = sampler(maps.sigma_a.shape[:2], True)
     return PixelShading(buffers.normal, buffers.view, buffers.coverage, tuple(lights),
                         plan.on(Pass.SINGLE_SCATTERING), plan.on(Pass.SPECULAR), material.roughness,
                         material.specular, colour_map, coefficient_map)

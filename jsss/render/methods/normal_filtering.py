@@ -21,6 +21,7 @@ import numpy as np
 from ...diffusion.incidence import incidence_law
 from ..image_space import SampledProfile, rms_radius
 from ..lighting import light_geometry
+from ..memory import camera_key, digest, kept, light_key, mesh_key
 from ..mesh import weld
 from ..normal_filter import laplacian_spectrum, smooth_normals, spectral_filter
 from ..passes import Method
@@ -89,16 +90,23 @@ class NormalFiltering(PixelMethod):
 
     def prepare_own(self, scene, params, buffers, maps, timings):
         t0 = time.perf_counter()
+        # Kept while the mesh, camera, lights' positions and the profile are the same (memory.py)
+        key = (mesh_key(scene.mesh), camera_key(scene.camera), tuple(light_key(light) for light in scene.lights),
+               scene.shadow_map_size, self.kind, self.eigenpairs, digest(params.profile))
+        channel_lights = kept("filtered normals", key, lambda: self._channel_lights(scene, params, buffers, maps))
+        timings["normal filter"] = time.perf_counter() - t0
+        return channel_lights, 0.0
+
+    def _channel_lights(self, scene, params, buffers, maps):
+        """Each channel's lights at its filtered normals (a tuple over channels of tuples over lights)."""
         filtered = filtered_normals(scene, params.profile, kind=self.kind, eigenpairs=self.eigenpairs)
         raster, faces = buffers.raster, scene.mesh.faces
         # Two-sided shading turned some pixels' normals around: turn their filtered normals too.
         facing = np.sign((surface_attributes(raster, faces, scene.mesh.normals) * buffers.normal).sum(-1))
         channel_normals = [surface_attributes(raster, faces, filtered[:, c]) * facing[..., None]
                            for c in range(filtered.shape[1])]
-        channel_lights = tuple(tuple(light_geometry(buffers.position, normals, buffers.mask, light, m)
-                                     for light, m in zip(scene.lights, maps)) for normals in channel_normals)
-        timings["normal filter"] = time.perf_counter() - t0
-        return channel_lights, 0.0
+        return tuple(tuple(light_geometry(buffers.position, normals, buffers.mask, light, m)
+                           for light, m in zip(scene.lights, maps)) for normals in channel_normals)
 
     def exitance(self, params, prepared: PixelPrepared):
         """:math:`M_c = \\rho_c E(x; n_c)` (H, W, C) [W/mm^2]: each channel lit with its own filtered normals."""

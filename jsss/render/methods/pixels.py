@@ -20,14 +20,17 @@ from typing import TYPE_CHECKING
 
 import jax.numpy as jnp
 
-from ..image_space import CameraBuffers, camera_buffers
-from ..lighting import light_geometry, shadow_map
+from ..image_space import CameraBuffers
+from ..memory import camera_key
 from ..surface_maps import read_points
 from .base import (
     PixelShading,
     PreparedGeometry,
     RenderMethod,
     camera_radiance,
+    kept_camera,
+    kept_lights,
+    kept_shadow_maps,
     pixel_shading,
 )
 
@@ -71,10 +74,10 @@ class PixelMethod(RenderMethod):
         """Rasterize the camera view and the lights' shadows, then what the method itself needs."""
         timings = {} if timings is None else timings
         t0 = time.perf_counter()
-        buffers = camera_buffers(scene.mesh, scene.camera)
-        maps = [shadow_map(scene.mesh, light, size=scene.shadow_map_size) for light in scene.lights]
-        lights = tuple(light_geometry(buffers.position, buffers.normal, buffers.mask, light, m)
-                       for light, m in zip(scene.lights, maps))
+        buffers = kept_camera(scene)  # each kept while the mesh, camera and lights' positions stay
+        maps = kept_shadow_maps(scene)
+        lights = kept_lights(scene, ("camera", camera_key(scene.camera)), buffers.position, buffers.normal,
+                             buffers.mask, maps)
         timings["camera raster + shadows"] = time.perf_counter() - t0
         channel_lights, disc_radius = self.prepare_own(scene, params, buffers, maps, timings)
         return PixelPrepared(buffers, pixel_shading(scene, plan, buffers, lights), channel_lights, disc_radius)

@@ -27,13 +27,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..blur import blur_schedule, hierarchical_blur, uniform_stretch
-from ..image_space import camera_buffers
-from ..lighting import (
-    light_geometry,
-    lookup,
-    shadow_map,
-    translucent_transmission,
-)
+from ..lighting import lookup, translucent_transmission
+from ..memory import camera_key, kept, mesh_key
 from ..mesh import is_closed
 from ..passes import Method, Pass
 from ..raster import surface_attributes
@@ -45,6 +40,9 @@ from .base import (
     RenderMethod,
     camera_radiance,
     entry_irradiance,
+    kept_camera,
+    kept_lights,
+    kept_shadow_maps,
     pixel_shading,
 )
 
@@ -79,6 +77,15 @@ class TexturePrepared(PreparedGeometry):
     open_margin: int = 0
     colour_map: MapSampler | None = None
     coefficient_map: MapSampler | None = None
+
+
+def _stretch(texels: TexelGeometry, correct: bool):
+    """World length of a texel step: per texel (stretch correction), or the median texel length
+    everywhere; then a scalar per axis whose texels all have one length (a plane's both, a
+    sphere's v): the blur reads that axis's taps as slices, not gathers (decided here: in the
+    jitted passes the map is traced)."""
+    stretch = texels.stretch if correct else np.where(texels.mask[..., None], texels.median_stretch(), 0.0)
+    return uniform_stretch(stretch, texels.mask)
 
 
 @final
@@ -122,41 +129,40 @@ class TextureSpace(RenderMethod):
         """Bake texels, shadow maps and the camera's visibility for ``scene``; build the blur chain
         for ``plan.variances``. (``params`` is not read: nothing here depends on the profile.)"""
         timings = {} if timings is None else timings
+        mesh_id = mesh_key(scene.mesh)  # each piece is kept while the mesh, camera and lights' positions stay
         t0 = time.perf_counter()
-        texels = bake_texels(scene.mesh, self.size)
+        texels = kept("texels", (mesh_id, self.size), lambda: bake_texels(scene.mesh, self.size))
         timings["texture geometry"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        maps = [shadow_map(scene.mesh, light, size=scene.shadow_map_size) for light in scene.lights]
-        texel_lights = tuple(light_geometry(texels.position, texels.normal, texels.mask, light, m)
-                             for light, m in zip(scene.lights, maps))
+        maps = kept_shadow_maps(scene)
+        texel_lights = kept_lights(scene, ("texels", self.size), texels.position, texels.normal, texels.mask, maps)
         timings["shadows"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        camera = camera_buffers(scene.mesh, scene.camera)  # two-sided: normals turned towards the camera
-        uv = surface_attributes(camera.raster, scene.mesh.faces, scene.mesh.uvs)
-        pixel_lights = tuple(light_geometry(camera.position, camera.normal, camera.mask, light, m)
-                             for light, m in zip(scene.lights, maps))
+        camera = kept_camera(scene)  # two-sided: normals turned towards the camera
+        at_camera = ("camera", camera_key(scene.camera))
+        uv = kept("camera uv", (mesh_id, at_camera),
+                  lambda: surface_attributes(camera.raster, scene.mesh.faces, scene.mesh.uvs))
+        pixel_lights = kept_lights(scene, at_camera, camera.position, camera.normal, camera.mask, maps)
         timings["camera raster"] = time.perf_counter() - t0
-        if plan.on(Pass.STRETCH_CORRECTION):
-            stretch = texels.stretch
-        else:  # uniform: the median texel length everywhere
-            stretch = np.where(texels.mask[..., None], texels.median_stretch(), 0.0)
-        # A scalar per axis whose texels all have one length (a plane's both, a sphere's v): the blur
-        # then reads that axis's taps as slices, not gathers (decided here: in the jitted passes the
-        # map is traced).
-        stretch = uniform_stretch(stretch, texels.mask)
-        schedule = blur_schedule(np.asarray(plan.variances), texels.median_stretch(), max_ratio=self.max_ratio) \
+        correct = plan.on(Pass.STRETCH_CORRECTION)
+        stretch = kept("texel stretch", (mesh_id, self.size, correct), lambda: _stretch(texels, correct))
+        median = kept("median stretch", (mesh_id, self.size), texels.median_stretch)
+        schedule = blur_schedule(np.asarray(plan.variances), median, max_ratio=self.max_ratio) \
             if plan.on(Pass.DIFFUSION) else None
         margin = 0
         if schedule is not None and not is_closed(scene.mesh):
-            reach = 3.0 * np.sqrt(float(np.max(plan.variances))) / texels.median_stretch()
+            reach = 3.0 * np.sqrt(float(np.max(plan.variances))) / median
             margin = int(min(np.ceil(reach), texels.size // 4))
         colour_map = coefficient_map = None
         maps = scene.material.maps
         if maps is not None and maps.colour is not None:
-            colour_map = MapSampler.texels(self.size, maps.colour.shape[:2], wrap_u=texels.wrap_u)
+            colour_map = kept("texel map sampler", (self.size, maps.colour.shape[:2], texels.wrap_u, False),
+                              lambda: MapSampler.texels(self.size, maps.colour.shape[:2], wrap_u=texels.wrap_u))
         if maps is not None and maps.parametric:
             # Each map texel is one medium (surface_maps.crossing_light says why)
-            coefficient_map = MapSampler.texels(self.size, maps.sigma_a.shape[:2], wrap_u=texels.wrap_u, nearest=True)
+            coefficient_map = kept("texel map sampler", (self.size, maps.sigma_a.shape[:2], texels.wrap_u, True),
+                                   lambda: MapSampler.texels(self.size, maps.sigma_a.shape[:2], wrap_u=texels.wrap_u,
+                                                             nearest=True))
         return TexturePrepared(texels, texel_lights, camera.mask, uv, pixel_shading(scene, plan, camera, pixel_lights),
                                stretch, schedule, plan.on(Pass.TRANSLUCENT_SHADOW_MAPS), margin, colour_map,
                                coefficient_map)
