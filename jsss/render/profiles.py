@@ -239,7 +239,9 @@ def _numpy_fit(variances, r, reference):
     weights, _, basis = _fit_weights(variances, r, profile, total, xp=np)
     residual = profile - basis @ weights
     num = np.trapezoid(r[:, None] * residual**2, r, axis=0)
-    return weights, np.sqrt(num / np.trapezoid(r[:, None] * profile**2, r, axis=0))
+    den = np.trapezoid(r[:, None] * profile**2, r, axis=0)
+    # A channel that returns no light (a clear drink's sigma_s' = 0) has nothing to miss: error 0, not 0/0.
+    return weights, np.sqrt(np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0))
 
 
 def reduction_error(material: Material, variances, *, radii=None, reference=None) -> np.ndarray:

@@ -202,10 +202,6 @@ def test_a_scene_with_an_unknown_name_names_the_close_ones():
         parse_scene(data, source="s.toml")
 
 
-@pytest.mark.filterwarnings("ignore:invalid value encountered in divide:RuntimeWarning")
-@pytest.mark.xfail(raises=TypeError, strict=True,
-                   reason="jsss/render/profiles.py: the relative error of the Gaussian fit to an all-zero "
-                          "profile is 0/0 (nan), so choose_variances finds no grid; to be fixed there")
 def test_a_material_with_a_channel_that_does_not_scatter_renders():
     """Merlot scatters in red only (sigma_s' = 0 in G and B): its frame is finite, dark in G, B."""
     import jax.numpy as jnp
