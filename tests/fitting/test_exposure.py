@@ -18,6 +18,8 @@ from fitting.render import GAIN_PINNED, RenderFitError, fit_render, gain_from_re
 from jsss import dipole
 from jsss.render import parse_scene, plan_scene, render
 
+from .test_render import SCENE
+
 CARD = """
 [geometry]
 shape = "plane"
@@ -92,31 +94,7 @@ def test_bad_reference_input_is_one_clear_error(card):
         gain_from_reference(card, photo, 0.99, mask=np.zeros(photo.shape[:2], bool))
 
 
-SPHERE = """
-[geometry]
-shape = "sphere"
-radius = 20.0
-
-[material]
-sigma_a = [0.0021, 0.0041, 0.0071]
-sigma_s_prime = [2.19, 2.62, 3.00]
-eta = 1.5
-roughness = 0.25
-
-[[lights]]
-type = "directional"
-direction = [0.6, 0.8, -0.5]
-intensity = 1.0
-
-[camera]
-position = [0.0, -110.0, 30.0]
-look_at = [0.0, 0.0, 0.0]
-fov = 28
-resolution = [64, 48]
-
-[render]
-texture_size = 128
-"""
+SPHERE = SCENE  # the marble sphere of test_render: eta 1.5, a directional light, 64 x 48
 
 
 @pytest.fixture(scope="module")
