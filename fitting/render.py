@@ -104,6 +104,9 @@ class RenderFit:
         What each round re-planned, and why.
     sigma : ndarray (H, W, 3)
         Each pixel's standard error as fitted (given, or estimated from the photo).
+    gain_unresolved : bool
+        The gain was fitted and the photo did not pin it (:data:`GAIN_PINNED`): R_d, sigma_a and
+        the gain are one direction without finite errors, not measurements.
     """
 
     medium: Medium
@@ -128,6 +131,7 @@ class RenderFit:
     warnings: tuple = ()
     history: tuple = ()
     sigma: np.ndarray | None = None
+    gain_unresolved: bool = False
 
     def as_dict(self) -> dict:
         """JSON-ready summary (lists per channel)."""
@@ -366,7 +370,7 @@ def estimate_noise(residual, expected, use) -> np.ndarray:
     pixel (a biased model) does not pass for noise and still shows in chi^2; each of 12 bins of
     :math:`\mu` takes its variance from the median absolute difference (1.4826 MAD: robust to
     fireflies and hot pixels), and :math:`a, b, c \ge 0` are fitted to the bins by non-negative least
-    squares weighted by their pixel counts.
+    squares in relative terms (each bin's variance is known to about :math:`1/\sqrt{n}` of itself).
 
     Parameters
     ----------
@@ -584,6 +588,8 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     inverse_sigma = whitening(sigma)
     target = jnp.asarray(np.where(use[..., None], photo, 0.0), dtype)
     mask = jnp.asarray(mask, dtype)
+    # The held gain, the reference's ln gain and its inverse relative error (_residual_fn)
+    exposure = jnp.asarray([held_gain or 1.0, np.log(held_gain or 1.0), 1.0 / gain_err if prior else 0.0], dtype)
     notes, history, steps = [], [], 0
     say = progress if progress is not None else (lambda message: None)
     def plan_for(theta, method=method):
@@ -618,7 +624,6 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
             theta = theta.at[6].set(jnp.log(jnp.asarray(max(best, 1e-300), dtype)))
         say(f"round {round_ + 1}: Levenberg-Marquardt on {int(use.sum())} pixels (the first solve compiles)")
         residuals = _residual_fn(render, fit_gain, block, prior, robust)
-        exposure = jnp.asarray([held_gain or 1.0, np.log(held_gain or 1.0), 1.0 / gain_err if prior else 0.0], dtype)
         args = (data, target, mask, inverse_sigma, eta, exposure)
         theta, n_steps, solved, jac = _solve(residuals, theta, args, max_steps=max_steps,
                                              rtol=1e-8, atol=1e-10)
@@ -728,4 +733,4 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
                      bool(solved) and not edge and not unresolved and bool(np.all(np.isfinite(theta_np)))
                      and bool(np.all(np.isfinite(rel))),
                      int(use.sum()), plan.method, profile_model,
-                     image * gain_value, use, tuple(notes), tuple(history), np.asarray(sigma))
+                     image * gain_value, use, tuple(notes), tuple(history), np.asarray(sigma), unresolved)

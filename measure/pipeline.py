@@ -22,7 +22,6 @@ from .profile import (Calibrated, RadialProfile, beam_center, beam_sigma, beam_w
 __all__ = ["MeasurementFit", "fit_measurement"]
 
 
-
 @dataclass(frozen=True)
 class MeasurementFit:
     """The fit and what it was fitted to."""

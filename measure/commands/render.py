@@ -451,7 +451,7 @@ def _fit(args) -> int:
             print(f"  {name:<20}" + "  ".join(f"{v:.5g} +- {e:.2g}" for v, e in zip(values, errors)))
         print(f"  {'gain':<20}{summary['gain']:.5g} +- {summary['gain_err']:.2g} ({exposure})")
     print("wrote " + ", ".join(str(p) for p in [*files, figure]), file=sys.stderr if args.json else sys.stdout)
-    if any(w.startswith("exposure unresolved") for w in result.warnings):
+    if result.gain_unresolved:
         print(f"{args.prog}: error: the exposure is unresolved, so R_d and sigma_a are not measurements: add a white "
               "target of known reflectance (--reference-scene CARD.toml, --reference-reflectance) or give the gain "
               "(--gain G)", file=sys.stderr)
