@@ -14,6 +14,19 @@ Jacobian at the solution, :math:`\mathrm{cov} = s^2 (J^T J)^{-1}` with
 :math:`s^2 = \max(1, \chi^2/(m - 2))` (:mod:`fitting.statistics`; the inverse is a
 pseudo-inverse here, and a parameter the data do not feel is caught by ``converged``).
 
+With ``"transport"`` the tables' own Monte Carlo noise is added: a model error, the same for
+every image fitted with those tables, that the residuals cannot show (it is smooth in r and
+the parameters absorb it). Each table cell c is an independent tally with relative error
+:math:`\sigma_c` from the tables themselves (:func:`jsss.transport.profiles.noise_slice`:
+:math:`\mathrm{Var}\,T = (T(2a')/A - T(a')^2)/N`); moving its log value by
+:math:`\sigma_c\xi_c` (all absorption nodes alike) moves every radius that reads it, through
+the interpolation, the beam, the bins and the total, so bins sharing a cell are correlated.
+The fit's linear response :math:`\delta\theta = -(J^TJ)^{+}J^T\,\delta r` gives
+:math:`\mathrm{cov} \mathrel{+}= G G^T` with :math:`G = -(J^TJ)^{+}J^T\,\partial r/\partial\xi`
+(forward differentiation over the 73 radial cells of each of the one or two exit-angle bins
+read). It is not scaled by :math:`s^2`: it is not the data's noise. Its share is reported
+apart (``sigma_a_table_err``, ``sigma_s_prime_table_err``).
+
 The forward model is a parameter. ``"dipole"`` is the dipole profile convolved with the
 Gaussian beam (of standard deviation ``beam_sigma`` mm, from the reference image) through
 the exact dipole spectrum and one inverse Hankel transform, and averaged over the same pixels
@@ -41,6 +54,7 @@ import optimistix as optx
 import scipy.sparse
 
 from jsss import transport
+from jsss.transport import profiles
 from jsss.diffusion import dipole
 from jsss.layers import hankel
 from fitting.programs import reusable_program
@@ -62,7 +76,8 @@ class MediumFit(eqx.Module):
     medium : Medium
         The estimate.
     sigma_a_err, sigma_s_prime_err : Array [1/mm]
-        One-sigma standard errors: s^2 (J^T J)^-1 with s^2 = max(1, chi^2/dof), plus the reference's scale error.
+        One-sigma standard errors: s^2 (J^T J)^-1 with s^2 = max(1, chi^2/dof), plus the reference's scale error,
+        plus (``model="transport"``) the tables' own Monte Carlo noise.
     total_reflectance : Array
         The model's total diffuse reflectance (whole plane) at the estimate.
     rel_residual : Array
@@ -75,6 +90,9 @@ class MediumFit(eqx.Module):
         standard error smaller than its parameter, and each parameter felt by the data (a
         factor e in it moves the whitened residuals by more than one): a parameter that ran
         away, to infinity or to 0, is not converged.
+    sigma_a_table_err, sigma_s_prime_table_err : Array [1/mm]
+        The share of the tables' Monte Carlo noise in the errors above (added in quadrature:
+        the data's share is ``sqrt(err**2 - table_err**2)``); 0 for the dipole.
     """
 
     medium: Medium
@@ -85,6 +103,8 @@ class MediumFit(eqx.Module):
     chi2_reduced: jax.Array
     n_iterations: jax.Array
     converged: jax.Array
+    sigma_a_table_err: jax.Array | None = None
+    sigma_s_prime_table_err: jax.Array | None = None
 
 
 def _interpolation_rows(grid_r, radii, rows, n_rows, scale):
@@ -133,7 +153,7 @@ def _residuals(params, args):
 # Console scripts keep this traced across processes (its tracing is 4-6 s of a command's start).
 @reusable_program(static_argnames=("max_steps", "model", "n_starts", "multistart"))
 @partial(jax.jit, static_argnames=("max_steps", "model", "n_starts", "multistart"))
-def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, k, grid_r, bins_operator,
+def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, noise, k, grid_r, bins_operator,
                   total_operator, *, max_steps, rtol, atol, model, n_starts, multistart):
     # From a scanned start, Gauss-Newton takes 6-16 steps where Levenberg-Marquardt took 20-90
     # (its trust region grows slowly), to the same estimate (within 1e-9 on 13 of 16 transport
@@ -141,7 +161,7 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
     # stays for the multistart retry, whose far starts need its damping.
     solver = (optx.LevenbergMarquardt if multistart else optx.GaussNewton)(rtol=rtol, atol=atol)
 
-    def one(meas, err, total, total_err, scale_err, eta_c, fixed_c):
+    def one(meas, err, total, total_err, scale_err, eta_c, fixed_c, noise_c):
         usable = (meas > 0) & (err > 0)
         inv_rel_err = jnp.where(usable, meas / jnp.where(usable, err, 1.0), 0.0)
         inv_total_err = jnp.where(total_err > 0, 1.0 / jnp.where(total_err > 0, total_err, 1.0), 0.0)
@@ -181,11 +201,24 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
         d_res_d_scale = -jnp.concatenate([inv_rel_err, (total * inv_total_err)[None]])
         d_params_d_scale = -normal_inverse @ (jac.T @ d_res_d_scale)
         cov = cov + jnp.outer(d_params_d_scale, d_params_d_scale) * scale_err**2
+        table_cov = jnp.zeros_like(cov)
+        if model[0] == "transport":  # the tables' own noise (module docstring)
+            cell_errors = profiles.slice_cell_errors(noise_c, Medium(jnp.exp(params[0]), jnp.exp(params[1]), eta_c))
+
+            def shifted(delta):
+                moved = (args[0][:2] + (profiles.shift_slice(fixed_c, delta),) + args[0][3:],) + args[1:]
+                return _residuals(params, moved)
+
+            d_res_d_cells = jax.jacfwd(shifted)(jnp.zeros_like(cell_errors)) * cell_errors   # (m, bins, rho)
+            response = -normal_inverse @ (jac.T @ d_res_d_cells.reshape(d_res_d_cells.shape[0], -1))
+            table_cov = response @ response.T
+        cov = cov + table_cov
         binned, _ = _model(params, args[0])
         rel = jnp.where(usable, binned / jnp.where(usable, meas, 1.0) - 1, 0.0)
         rel_rms = jnp.sqrt(jnp.sum(rel**2) / jnp.maximum(jnp.sum(usable), 1))
         sa, ss = jnp.exp(params[0]), jnp.exp(params[1])
         sa_err, ss_err = sa * jnp.sqrt(cov[0, 0]), ss * jnp.sqrt(cov[1, 1])
+        sa_table, ss_table = sa * jnp.sqrt(table_cov[0, 0]), ss * jnp.sqrt(table_cov[1, 1])
         # The solver stopping is not enough: a parameter that runs off (sigma_s' = 1e29 on a
         # swapped image) "converges" with an error larger than itself, and one that runs to 0
         # (sigma_a when nothing in the data depends on it) leaves J^T J singular, where the
@@ -197,9 +230,11 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
         determined = jnp.all(jnp.isfinite(values)) & (sa_err < sa) & (ss_err < ss) & jnp.all(felt)
         # The model's whole-plane total at the estimate, on the full grid (reported, not fitted).
         plane_total = observable(*model, Medium(sa, ss, eta_c), k, grid_r, fixed_c)[1]
-        return sa, ss, sa_err, ss_err, plane_total, rel_rms, chi2_red, loss, steps, ok & determined
+        return (sa, ss, sa_err, ss_err, plane_total, rel_rms, chi2_red, loss, steps, sa_table, ss_table,
+                ok & determined)
 
-    return jax.vmap(one, in_axes=(1, 1, 0, 0, 0, 0, 0))(measured, stderr, totals, total_errs, scale_errs, eta, fixed)
+    return jax.vmap(one, in_axes=(1, 1, 0, 0, 0, 0, 0, 0))(measured, stderr, totals, total_errs, scale_errs, eta, fixed,
+                                                          noise)
 
 
 def _starting_points(total, eta, n_starts, *, scan):
@@ -334,10 +369,11 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
     options = dict(max_steps=max_steps, rtol=rtol, atol=atol,
                    model=(model, float(g), None if view_cos is None else float(view_cos)))
     # The tables at this eta and observable, once (the fit holds both fixed).
-    fixed = (transport.fixed_slice(eta, g=float(g), cos_exit=None if view_cos is None else float(view_cos))
-             if model == "transport" else None)
-    operands = (measured, errors, totals, total_errs, scale_errs, eta, fixed, jnp.asarray(grid.k, measured.dtype),
-                jnp.asarray(grid.r, measured.dtype), bins_operator, total_operator)
+    cos_exit = None if view_cos is None else float(view_cos)
+    fixed = transport.fixed_slice(eta, g=float(g), cos_exit=cos_exit) if model == "transport" else None
+    noise = profiles.noise_slice(np.asarray(eta), g=float(g), cos_exit=cos_exit) if model == "transport" else None
+    operands = (measured, errors, totals, total_errs, scale_errs, eta, fixed, noise,
+                jnp.asarray(grid.k, measured.dtype), jnp.asarray(grid.r, measured.dtype), bins_operator, total_operator)
     if init not in ("scan", "multistart"):
         raise ValueError(f"fit_medium(init={init!r}): valid values are 'scan' and 'multistart'.")
     multistart = init == "multistart"
@@ -348,5 +384,5 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
         retry = _fit_channels(*operands, **options, multistart=True, n_starts=7)
         better = np.asarray(retry[7]) < np.asarray(out[7])
         out = tuple(jnp.where(better, b, a) for a, b in zip(out, retry))
-    sa, ss, sa_err, ss_err, total, rel, chi2, _, steps, ok = out
-    return MediumFit(Medium(sa, ss, eta), sa_err, ss_err, total, rel, chi2, steps, ok)
+    sa, ss, sa_err, ss_err, total, rel, chi2, _, steps, sa_table, ss_table, ok = out
+    return MediumFit(Medium(sa, ss, eta), sa_err, ss_err, total, rel, chi2, steps, ok, sa_table, ss_table)

@@ -133,6 +133,11 @@ class MeasurementFit:
             "sigma_s_prime": as_list(f.medium.sigma_s_prime),
             "sigma_a_err": as_list(f.sigma_a_err),
             "sigma_s_prime_err": as_list(f.sigma_s_prime_err),
+            # The transport tables' own Monte Carlo noise, included in the errors above (in quadrature).
+            "sigma_a_table_err": as_list(_or_zeros(f.sigma_a_table_err, f.sigma_a_err)),
+            "sigma_s_prime_table_err": as_list(_or_zeros(f.sigma_s_prime_table_err, f.sigma_s_prime_err)),
+            "errors_include": ["data noise", "calibration scale"] + (["table noise"] if self.model == "transport"
+                                                                     else []),
             "eta": as_list(np.broadcast_to(np.asarray(f.medium.eta), np.shape(f.medium.sigma_a))),
             "total_reflectance": as_list(self.diffuse_reflectance),
             "observable_total": as_list(f.total_reflectance),
@@ -151,6 +156,11 @@ class MeasurementFit:
             "observable": "exitance" if self.view_angle_deg is None else "radiance",
             "view_angle_deg": self.view_angle_deg,
         }
+
+
+def _or_zeros(share, like):
+    """A fit's error share, or zeros shaped as ``like`` where the fit has none (the dipole)."""
+    return np.zeros(np.shape(like)) if share is None else share
 
 
 def _sum_variance(images, center, pixel_mm):

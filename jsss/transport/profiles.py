@@ -17,7 +17,11 @@ tabulated values. Between table nodes :math:`\log T` is interpolated with Catmul
 splines in :math:`\log\rho'` and :math:`\log a'`, so profiles are smooth in ``r``,
 ``sigma_a``, ``sigma_s_prime`` and ``eta``, and ``jax.grad`` works through them. Their
 accuracy is the Monte Carlo noise of the tables (``photons`` in :func:`table_info`) plus the
-interpolation; ``benchmarks/profiles.py`` measures both against independent walks.
+interpolation; ``benchmarks/profiles.py`` measures both against independent walks. The noise
+follows from the tables themselves (a cell's second moment is the cell at twice the
+absorption): :func:`cell_relative_variance` per cell, :func:`noise_slice` and
+:func:`slice_cell_errors` for a fit's slice, :func:`slice_relative_error` per model value
+(``fitting.medium`` carries it into the stated errors; ``benchmarks/table_noise.py``).
 
 Valid range: reduced albedo :math:`\alpha' \ge 0.001` (:math:`a' \le 10^3`), radii from
 :math:`10^{-3}` to :math:`10^3` transport lengths (constant inside, decaying beyond), any
@@ -39,8 +43,9 @@ from ..fresnel import fresnel_reflectance
 from ..medium import Medium
 from ..numerics import append_axes, as_float_array, is_concrete
 
-__all__ = ["FixedSlice", "check_medium", "check_supported", "entry_transmittance", "fixed_slice", "profile", "radiance",
-           "slice_values", "table_info", "total_reflectance"]
+__all__ = ["FixedSlice", "cell_relative_variance", "check_medium", "check_supported", "entry_transmittance",
+           "fixed_slice", "noise_slice", "profile", "radiance", "shift_slice", "slice_cell_errors",
+           "slice_relative_error", "slice_values", "table_info", "total_reflectance"]
 
 _FLOOR = 1e-30  # added before taking logs: empty table cells (no photon reached them)
 
@@ -367,3 +372,164 @@ def slice_values(fixed: FixedSlice, medium: Medium, r):
 def entry_transmittance(eta):
     r"""Fraction of a normally incident beam that enters: :math:`1 - F(0) = 1 - ((\eta-1)/(\eta+1))^2`."""
     return 1.0 - fresnel_reflectance(1.0, eta)
+
+
+# --- The tables' own Monte Carlo noise (issue 37) -----------------------------------------------
+#
+# A cell of a table is a mean over the walk's N photons of X = e^{-a' L} 1[cell] / A (A the
+# cell's area in transport lengths^2, a' = sigma_a / sigma_s'). Its second moment is the same
+# tally at twice the absorption, E[X^2] = E[e^{-2a' L} 1[cell]] / A^2 = T(2a') / A, so
+#
+#     Var(T(a')) = (T(2a') / A - T(a')^2) / N,   relative: (T(2a') / (A T(a')^2) - 1) / N,
+#
+# from the tables themselves. The shipped tables average four independent runs of equal size,
+# which is one run of all their photons. Exit-angle bins divide a cell by its (exact) projected
+# solid angle, which leaves the relative variance as it is; the totals are per photon (A = 1).
+
+
+def _catmull_rom_np(position, n):
+    """:func:`_catmull_rom` in NumPy (float64 whatever JAX's precision), for tables built once."""
+    base = np.clip(np.floor(position), 0, n - 2)
+    t = np.clip(position - base, 0.0, 1.0)
+    t2, t3 = t * t, t * t * t
+    w = np.stack([(-t3 + 2 * t2 - t) / 2, (3 * t3 - 5 * t2 + 2) / 2, (-3 * t3 + 4 * t2 + t) / 2, (t3 - t2) / 2], -1)
+    first, last = (base == 0)[..., None], (base == n - 2)[..., None]
+    w = np.where(first, w + np.array([-1.0, 2.0, -1.0, 0.0]) * w[..., :1], w)
+    w = np.where(last, w + np.array([0.0, -1.0, 2.0, -1.0]) * w[..., 3:], w)
+    index = np.clip(base.astype(int)[..., None] + np.arange(-1, 3), 0, n - 1)
+    return index, w
+
+
+def _at_double_absorption(values, absorption):
+    """``values`` (..., n_a) at the absorption nodes, taken to twice each node's a'.
+
+    At a' = 0 twice is itself. The other nodes are uniform in log a', so 2a' lies log10(2)
+    node steps above its node: Catmull-Rom in log a' of log T (the profiles' own
+    interpolation); beyond the last node (a' > 500), linear in log-log from the last two."""
+    log_v = np.log(np.maximum(np.asarray(values, float), 1e-300))
+    out = log_v.copy()
+    rows = log_v[..., 1:]
+    n = rows.shape[-1]
+    step = np.log10(absorption[2]) - np.log10(absorption[1])
+    position = np.arange(n) + np.log10(2.0) / step
+    index, weight = _catmull_rom_np(position, n)
+    out[..., 1:] = np.sum(rows[..., index] * weight, axis=-1)
+    beyond = position > n - 1
+    out[..., 1:][..., beyond] = rows[..., -1:] + (rows[..., -1:] - rows[..., -2:-1]) * (position[beyond] - (n - 1))
+    return np.exp(out)
+
+
+def cell_relative_variance(values, absorption, area, photons):
+    r"""Relative variance :math:`\mathrm{Var}(T)/T^2` of each Monte Carlo tally of a table, from the table.
+
+    Parameters
+    ----------
+    values : array_like (..., n_a)
+        Cell means :math:`T(a'_j)` per unit area (or totals per photon, with ``area`` 1) at
+        the absorption nodes ``absorption`` (0, then uniform in log a', as
+        :class:`jsss.transport.tables.TableGrid`). Any constant factor per cell (an exit-angle
+        bin's solid angle) may be left in: it cancels.
+    area : array_like, broadcasting against ``values[..., 0]``
+        The cell's area [transport lengths^2] by which the tally was divided.
+    photons : int
+        The walk's photons N.
+
+    Returns
+    -------
+    ndarray (..., n_a)
+        :math:`(T(2a')/(A\,T(a')^2) - 1)/N` (see the comment above), :math:`T(2a')` interpolated
+        between nodes in log a'. A cell no photon reached, or one whose estimate exceeds it,
+        has 1 (the relative variance of a single photon's tally). None is below its value at
+        a' = 0, the binomial :math:`(1/P - 1)/N` of the cell's share P of the photons
+        (Cauchy-Schwarz: :math:`E[w 1]^2 \le E[w^2 1] P`); the interpolation at 2a' can
+        undershoot that bound at a' > 100 near the source, where it is used instead. The
+        shipped cells include the modelled tail beyond the walk's cap, which is not a tally;
+        read as one, it adds its share of a cell to that cell's variance (at a' = 0 a few
+        percent of the cells' value near rho' = 10, less inside).
+    """
+    values = np.asarray(values, float)
+    second = _at_double_absorption(values, absorption)
+    area = np.expand_dims(np.asarray(area, float), -1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        relative = (second / (area * values**2) - 1.0) / float(photons)
+    relative = np.maximum(relative, relative[..., :1])
+    return np.where(values > 0, np.clip(np.nan_to_num(relative, nan=1.0, posinf=1.0), 0.0, 1.0), 1.0)
+
+
+@functools.lru_cache(maxsize=None)
+def _noise_tables():
+    """Relative variances of the shipped cells: ``radiance`` (eta, g, mu, rho, a) per exit-angle
+    bin, ``exitance`` (eta, g, 1, rho, a) of the cells summed over exit angles."""
+    data = _tables()
+    cells = data["exitance"].astype(np.float64)                          # (eta, g, rho, a, mu)
+    area = np.pi * np.diff(data["rho_edges"] ** 2)
+    per_bin = cell_relative_variance(np.moveaxis(cells, -1, 2), data["absorption"], area, data["photons"])
+    summed = cell_relative_variance(cells.sum(-1)[:, :, None], data["absorption"], area, data["photons"])
+    return {"radiance": per_bin, "exitance": summed}
+
+
+def noise_slice(eta, *, g: float = 0.0, cos_exit: float | None = None) -> FixedSlice:
+    r"""The tables' relative variances, as :func:`fixed_slice` holds their values: for the same
+    ``eta`` (shape ``C``), ``g`` and ``cos_exit``; ``log_rows`` holds log relative variances.
+
+    Across eta the slice is :math:`\log T = \sum_e w_e \log T_e` over independent tables, so its
+    relative variance is :math:`\sum_e w_e^2\,\mathrm{Var}_e/T_e^2` (the Catmull-Rom weights
+    :math:`w_e`, squared). Evaluate with :func:`slice_cell_errors`."""
+    _check_eta(eta)
+    data = _tables()
+    eta = np.asarray(eta, float)
+    etas = data["etas"]
+    index, weight = _catmull_rom_np((eta - etas[0]) / (etas[1] - etas[0]), etas.size)   # C + (4,)
+    if cos_exit is None:
+        table, bins = _noise_tables()["exitance"][:, _g_index(g)], [0]
+    else:
+        table, bins = _noise_tables()["radiance"][:, _g_index(g)], [m for m, _ in _exit_bins(float(cos_exit))]
+    mixed = np.sum(table[:, bins][index] * (weight**2).reshape(weight.shape + (1, 1, 1)), axis=eta.ndim)
+    return FixedSlice(jnp.asarray(np.log(np.maximum(mixed, 1e-300)), as_float_array(eta).dtype),
+                      fixed_slice(eta, g=g, cos_exit=cos_exit).bin_weights)
+
+
+def slice_cell_errors(noise: FixedSlice, medium: Medium):
+    """Relative standard error of each cell of a :class:`FixedSlice` at ``medium``'s a'
+    (``C + (n_bins, n_rho + 1)``), from :func:`noise_slice`; interpolated in log a' as the
+    values are. A cell's tallies at neighbouring absorption nodes come from the same photons
+    and are taken as fully correlated (between two nodes a factor 10^0.2 apart their
+    correlation is above 0.97 where the cell has many photons), so the interpolated value has
+    the relative error of the cell at that a'."""
+    _, ratio, _ = _coefficients(medium)
+    return jnp.sqrt(jnp.exp(_interpolate_absorption(noise.log_rows, ratio, _tables()["absorption"])))
+
+
+def shift_slice(fixed: FixedSlice, delta) -> FixedSlice:
+    """``fixed`` with the log value of every cell moved by ``delta`` (``C + (n_bins, n_rho + 1)``),
+    at every absorption node alike: one cell's Monte Carlo error, for the fit's response to it."""
+    return FixedSlice(fixed.log_rows + jnp.asarray(delta)[..., None], fixed.bin_weights)
+
+
+@jax.jit  # eager, the forward derivative's operations were dispatched one by one (10 s)
+def slice_relative_error(fixed: FixedSlice, noise: FixedSlice, medium: Medium, r):
+    r"""Relative standard error of :func:`slice_values` at ``r`` (shape ``S``; result ``S + C``)
+    from the tables' own Monte Carlo noise.
+
+    The value at ``r`` is a weighted sum over the exit-angle bins of exponentials of a
+    Catmull-Rom interpolation of log cells in log rho, so to first order
+    :math:`\delta\ln V(r) = \sum_c \partial\ln V/\partial\ln T_c\ \delta\ln T_c` with cells
+    independent (separate tallies of the walk; neighbouring radii share cells and are
+    correlated through them). The profile's centre correction mixes neighbours' noise with
+    weights below 2 % and is left out.
+    """
+    cell_errors = slice_cell_errors(noise, medium)                                     # C + (bins, rho)
+    channels = medium.shape
+
+    def one(log_rows, sigma_a, sigma_s_prime, eta, errors):
+        single, one_medium = FixedSlice(log_rows, fixed.bin_weights), Medium(sigma_a, sigma_s_prime, eta)
+        log_value = lambda delta: jnp.log(slice_values(shift_slice(single, delta), one_medium, r))  # noqa: E731
+        jac = jax.jacfwd(log_value)(jnp.zeros_like(errors))                            # S + (bins, rho)
+        return jnp.sqrt(jnp.sum((jac * errors) ** 2, axis=(-2, -1)))
+
+    sigma_a, sigma_s_prime, eta = (jnp.broadcast_to(x, channels).reshape(-1)
+                                   for x in (medium.sigma_a, medium.sigma_s_prime, medium.eta))
+    rows = fixed.log_rows.reshape((-1,) + fixed.log_rows.shape[len(channels):])
+    errors = cell_errors.reshape((-1,) + cell_errors.shape[len(channels):])
+    out = jax.vmap(one, out_axes=-1)(rows, sigma_a, sigma_s_prime, eta, errors)
+    return out.reshape(out.shape[:-1] + channels)

@@ -82,14 +82,14 @@ def test_scale_is_not_in_the_profile(marble_image, grid):
 def test_the_stated_calibration_leverage_is_what_a_wrong_reference_does(marble_image, grid):
     """A reference 1 % brighter than stated moves marble's sigma_a by 6-9 % (refitted), and the
     leverage the table states, |d ln sigma_a / d ln R_d|, is that within a factor 1.6; neither is
-    in the stated errors, which are under 0.5 %."""
+    in the stated errors, which are under 2.5 % (most of it the tables' own noise)."""
     fits = [fit_measurement(marble_image.measurement, marble_image.reference, 0.14, 1.5, dark=marble_image.dark,
                             grid=grid, reference_reflectance=rho) for rho in (0.99, 0.99 * 1.01)]
     moved = np.abs(np.asarray(fits[1].table()["sigma_a"]) / np.asarray(fits[0].table()["sigma_a"]) - 1) * 100
     stated = np.asarray(fits[0].table()["sigma_a_per_calibration"])
     assert np.all(moved > 3) and np.all(stated > 5)
     assert np.all(stated / moved < 1.6) and np.all(moved / stated < 1.6), (stated, moved)
-    assert np.all(np.asarray(fits[0].table()["sigma_a_err"]) / np.asarray(fits[0].table()["sigma_a"]) < 0.005)
+    assert np.all(np.asarray(fits[0].table()["sigma_a_err"]) / np.asarray(fits[0].table()["sigma_a"]) < 0.025)
 
 
 def _run(*args, cwd=None):
