@@ -75,6 +75,7 @@ from .methods import (
 )
 from .passes import Method, Pass
 from .profile_blend import ProfileBasis, choose_basis
+from .profile_choice import ProfileChoice
 from .profiles import choose_variances, full_profile, render_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
@@ -114,6 +115,9 @@ class Plan:
     features : FrameFeatures, what the method's predicted error rests on (:func:`frame_features`)
     basis : ProfileBasis or None, the basis profiles a material's parameter maps are blended
         from (:mod:`jsss.render.profile_blend`); ``variances`` are then the basis'
+    profile : ProfileChoice or None, a homogeneous medium's profile model (dipole or
+        transport), why, and both models' predicted errors against the transport truth
+        (:mod:`jsss.render.profile_choice`); None for a stack or a given profile
 
     ``method`` (the :class:`~jsss.render.passes.Method`) and the knobs ``texture_size``,
     ``taps``, ``max_ratio``, ``samples`` and ``normal_filter`` read the configuration (None
@@ -131,6 +135,7 @@ class Plan:
     knob: str = ""
     features: FrameFeatures | None = None
     basis: ProfileBasis | None = None
+    profile: ProfileChoice | None = None
 
     @property
     def method(self) -> Method:
@@ -169,6 +174,8 @@ class Plan:
     def describe(self) -> str:
         head = [f"method: {self.method} -- {self.method_why}",
                 f"  profile RMS radius spans {self.blur_pixels:.3g} pixels"]
+        if self.profile is not None:
+            head.insert(1, f"  {self.profile.describe()}")
         if self.features is not None:
             head.append(f"  frame: {self.features.describe()}")
         if self.estimates:
@@ -382,7 +389,7 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
         error = basis.fit_error + basis.error
         reached = basis.fit_error <= target / 4 and basis.error <= target / 4
     else:
-        gs, error, reached = choose_variances(material, texture_target / 2)
+        gs, error, reached = choose_variances(material, texture_target / 2, resolution=pixel)
         variances, w = np.asarray(gs.variances), np.asarray(gs.weights)
     decisions[Pass.SURFACE_MAPS] = _maps_decision(material, basis, method)
     total = w.sum(0)
@@ -434,7 +441,7 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     config = method_config(method, texture_size=size, taps=7, max_ratio=2.0 if texture_target < 0.15 else 4.0,
                            samples=samples, normal_filter=normal_filter)
     return Plan(ordered, variances, error, config, pixel, method_why=method_why, estimates=estimates, blur_pixels=blur,
-                knob=knob, features=features, basis=basis)
+                knob=knob, features=features, basis=basis, profile=material.profile)
 
 
 def map_spread_error(scene: Scene, rms: float) -> float:

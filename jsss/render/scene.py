@@ -14,6 +14,10 @@ A scene file (lengths in mm, coefficients in 1/mm)::
                               # or [material.gaussians] variances/weights/eta
     roughness = 0.35          # specular lobe (Beckmann m); specular = 0 turns it off
     texturing = "pre-post"    # d'Eon's rule for a colour map: pre-post | pre | post
+    profile = "auto"          # a homogeneous medium's profile: auto (the default: the dipole where
+                              # its R_d is within a quarter of the accuracy of the transport tables',
+                              # else the tables; jsss.render.profile_choice) | dipole | transport;
+                              # g = 0 is its Henyey-Greenstein g
 
     [material.maps]           # optional, image files next to the scene (jsss.render.surface_maps)
     albedo = "veins.png"      # colour map: 8/16-bit sRGB or linear EXR, in [0, 1]
@@ -57,12 +61,15 @@ from .. import transport as _transport
 from ..gaussians.gaussian_sum import GaussianSum
 from ..materials import material as _library_material
 from ..medium import Medium
+from ..numerics import is_concrete
 from . import budget
 from . import mesh as _mesh
 from .artist_maps import coefficients_from_artist_maps
 from .environment import Environment
 from .lighting import Light
 from .passes import Method
+from .profile_choice import MODELS as PROFILE_MODELS
+from .profile_choice import ProfileChoice, choose_profile
 from .raster import PerspectiveView
 from .surface_maps import (
     ARTIST_KEYS,
@@ -88,8 +95,13 @@ class Material:
     Exactly one of ``medium`` (homogeneous, semi-infinite), ``layers`` (+ optional ``base``)
     or ``gaussians`` (a given profile) is set. ``eta`` (3,) is the index the surface's
     Fresnel terms use (the top layer's for a stack). A homogeneous medium's profile is the
-    dipole or, with ``profile_model = "transport"``, :mod:`jsss.transport` (exact to
-    radiative transfer) with Henyey-Greenstein ``g``. ``maps`` (:class:`SurfaceMaps`) vary
+    dipole or :mod:`jsss.transport` (exact to radiative transfer) with Henyey-Greenstein
+    ``g``: ``profile_model = "auto"`` (the default) keeps the dipole where its predicted error
+    against the transport truth is within a quarter of the accuracy target (a scene's, else
+    5 %) and takes the transport tables otherwise; ``"dipole"`` or ``"transport"`` is obeyed.
+    Building the material resolves it (:mod:`jsss.render.profile_choice`), so
+    ``profile_model`` then names the model used and ``profile`` holds the choice, its reasons
+    and both models' predicted errors (None for a stack, a given profile, or a traced medium). ``maps`` (:class:`SurfaceMaps`) vary
     the material over the surface; ``normalize_profile`` scales the profile's total to 1 per
     channel, so that a colour map alone sets the colour (d'Eon 2007 sec. 5.3).
     """
@@ -102,10 +114,32 @@ class Material:
     gaussians: GaussianSum | None = None
     specular: float = 1.0
     roughness: float = 0.35
-    profile_model: str = "dipole"
+    profile_model: str = "auto"
     g: float = 0.0
     maps: SurfaceMaps | None = None
     normalize_profile: bool = False
+    profile: ProfileChoice | None = None
+
+    def __post_init__(self):
+        if self.profile_model not in PROFILE_MODELS:
+            raise ValueError(f"profile_model must be one of {', '.join(PROFILE_MODELS)}; got {self.profile_model!r}.")
+        if self.medium is None or self.layers or self.gaussians is not None:
+            object.__setattr__(self, "profile", None)
+            return
+        if not is_concrete(self.medium):  # under jit or grad: the caller fixed the model
+            if self.profile_model == "auto":
+                raise ValueError("profile_model 'auto' is chosen from the medium's numbers, and this medium is "
+                                 "traced (jit or grad); give 'dipole' or 'transport'.")
+            object.__setattr__(self, "profile", None)
+            return
+        # dataclasses.replace keeps the old choice: an unchanged model keeps its request and
+        # target ("auto" stays auto for a new medium); a changed model is a new request.
+        kept = self.profile is not None and self.profile_model in (self.profile.model, self.profile.requested)
+        requested = self.profile.requested if kept else self.profile_model
+        target = self.profile.target if kept else 0.05
+        choice = choose_profile(self.medium, g=self.g, requested=requested, target=target)
+        object.__setattr__(self, "profile_model", choice.model)
+        object.__setattr__(self, "profile", choice)
 
     @property
     def kind(self) -> str:
@@ -437,16 +471,17 @@ def _material(t: _Table, source: str, base_dir: Path = Path("."), allow_outside:
         gt.check_unknown()
         material = Material("given Gaussians", eta, gaussians=GaussianSum(weights, variances), **surface)
     if t.has("profile") or t.has("g"):
-        model = t.string("profile", ("dipole", "transport"), "dipole")
+        model = t.string("profile", PROFILE_MODELS, "auto")
         g = t.number("g", 0.0)
         if model == "transport":
             if material.medium is None:
                 t.fail("profile", f"'transport' needs a homogeneous medium; this material is {material.kind}.")
             try:
                 _transport.check_supported(material.medium.eta, g)
+                _transport.check_medium(material.medium, g=g)
             except ValueError as error:
                 t.fail("profile", str(error))
-        material = dataclasses.replace(material, profile_model=model, g=float(g))
+        material = dataclasses.replace(material, profile_model=model, g=float(g), profile=None)
     texturing = t.string("texturing", TEXTURING, "pre-post")
     normalize = t.raw("normalize_profile", False)
     if not isinstance(normalize, bool):
@@ -586,6 +621,12 @@ def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".", allow_outs
             r.fail("method", f"must be auto, {', '.join(m.value for m in Method)}; got {method!r}.")
     r.check_unknown()
     root.check_unknown()
+    choice = material.profile
+    if choice is not None and choice.requested == "auto" and choice.target != accuracy and material.maps is None:
+        # auto weighs the dipole's error against this scene's target (parameter maps keep the
+        # choice their coefficients were converted with)
+        material = dataclasses.replace(material, profile_model="auto", profile=ProfileChoice(
+            choice.model, "auto", choice.why, accuracy))
     return Scene(mesh, material, lights, camera, accuracy, texture_size, shadow, exposure, source,
                  method=None if method == "auto" else method)
 

@@ -52,13 +52,15 @@ def test_layered_profile_only_for_layered_materials():
 
 
 def test_looser_target_gives_fewer_gaussians_and_each_meets_its_target():
-    scene = parse_scene(scene_dict(material={"name": "ketchup"}))
+    # The dipole: the transport profile's 1/r core is not met by 12 Gaussians at 1 %
+    # (tests/jsss/render/test_profile_choice.py measures what it places beyond a pixel).
+    scene = parse_scene(scene_dict(material={"name": "ketchup", "profile": "dipole"}))
     tight = plan_scene(scene, accuracy=0.02, method="texture-space")
     loose = plan_scene(scene, accuracy=0.3, method="texture-space")
     assert len(loose.variances) < len(tight.variances)
     assert loose.max_ratio > tight.max_ratio
     for plan, target in ((tight, 0.02), (loose, 0.3)):
-        error = reduction_error(scene.material, plan.variances)
+        error = reduction_error(scene.material, plan.variances, resolution=plan.pixel_size)
         assert np.max(error) <= target / 2 and np.isclose(np.max(error), plan.profile_error)
 
 

@@ -40,10 +40,17 @@ def _rectangle(x, y, sigma):
     return (ndtr(x / s) - ndtr((x - 20.0) / s)) * (ndtr((y + 20.0) / s) - ndtr((y - 20.0) / s))
 
 
-@pytest.mark.parametrize("name", ["skin1", "ketchup", "marble"])
-def test_radiance_across_a_shadow_edge_is_the_1d_integral_of_the_profile(name):
+@pytest.mark.parametrize("name, profile", [("skin1", "dipole"), ("ketchup", "dipole"), ("marble", "dipole"),
+                                           ("skin1", "auto"), ("ketchup", "auto")])
+def test_radiance_across_a_shadow_edge_is_the_1d_integral_of_the_profile(name, profile):
+    """Skin1 and ketchup take the transport profile at 5 % (``auto``), whose single-scattering
+    core puts Gaussians narrower than a 0.16 mm texel (0.02 mm): the blur gives them their
+    exact variance but not their shape, so in the texel on each side of the edge and the two
+    texels at the rim they are off by up to 2.6 % (measured); beyond those, within 1 % as the
+    dipole's are everywhere."""
     size = 256
-    scene, plan, prep, params, E, M, x = _shadow_edge({"name": name}, size)
+    scene, plan, prep, params, E, M, x = _shadow_edge({"name": name, "profile": profile}, size)
+    assert scene.material.profile_model == ("dipole" if profile == "dipole" else "transport")
     w, v = np.asarray(params.weights), np.asarray(params.variances)
     row = size // 2
     E0 = np.asarray(E)[row, -size // 4]  # irradiance on the lit side
@@ -53,6 +60,10 @@ def test_radiance_across_a_shadow_edge_is_the_1d_integral_of_the_profile(name):
     expected = E0 * (w[None] * _rectangle(x[row], y, np.sqrt(v))).sum(1)
     near, rim = np.abs(x[row]) < 10, x[row] > 10
     error = np.abs(np.asarray(M)[row] - expected) / (E0 * w.sum(0))
+    if profile == "auto":
+        texel = 40.0 / size
+        assert np.all(error[near | rim] < 0.03)
+        near, rim = near & (np.abs(x[row]) > texel), rim & (np.abs(x[row] - 20) > 2 * texel)
     assert np.all(error[near] < 0.01)  # measured at 256^2: 0.02-0.41 % of the lit exitance
     # At the open rim half the light leaves: 0.1-0.7 % off with the unlit margin, 44-49 % without it.
     assert np.all(error[rim] < 0.01)

@@ -1,0 +1,143 @@
+"""The profile model a homogeneous medium renders with (jsss.render.profile_choice).
+
+Truth for the predicted errors: adding-doubling (iadpython), which shares nothing with the
+dipole or the transport tables. The rest are the rules the scene file promises: ``auto`` by
+default, an explicit model obeyed with its predicted error stated, clear reasons where the
+tables do not reach.
+"""
+
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+
+from jsss import Medium, materials
+from jsss.diffusion import dipole
+from jsss.gaussians.gaussian_sum import GaussianSum
+from jsss.render import Material, SceneError, parse_scene, plan_scene
+from jsss.render.profile_choice import choose_profile
+from jsss.render.profiles import choose_variances, exact_profile, render_profile
+from tests.jsss.render.scenes import flat_plane, scene_dict
+
+iadpython = pytest.importorskip("iadpython")
+
+
+def _adding_doubling_total(medium):
+    """Semi-infinite R_d per unit entering flux (normal beam, g = 0 in reduced coefficients)."""
+    eta = float(np.asarray(medium.eta).ravel()[0])
+    specular = ((eta - 1) / (eta + 1)) ** 2
+    out = []
+    for albedo in np.asarray(medium.reduced_albedo, float):
+        sample = iadpython.Sample(a=float(albedo), b=1000.0, g=0.0, n=eta, n_above=1.0, n_below=1.0, quad_pts=16)
+        reflected, _, _, _ = sample.rt()
+        out.append((reflected - specular) / (1 - specular))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("name", ["ketchup", "marble", "skin1"])
+def test_the_dipoles_predicted_error_is_its_error_against_adding_doubling(name):
+    """The dipole's predicted error R_dip / R_tr - 1 equals R_dip / R_ad - 1 within 3 of the
+    tables' own stated errors (ketchup's green and blue: the tables' known +2 % at eta 1.3 and
+    albedo' < 0.1 is 2-2.5 of them). Auto at 5 % keeps the dipole exactly where the truth's
+    error is within a quarter of it (marble, -0.9 to -1.2 %)."""
+    medium = materials.material(name)
+    choice = choose_profile(medium, target=0.05)
+    truth = np.asarray(dipole.total_reflectance(medium)) / _adding_doubling_total(medium) - 1
+    np.testing.assert_array_less(np.abs((1 + choice.dipole_error) / (1 + truth) - 1),
+                                 3 * choice.transport_error + 1e-3)
+    assert choice.requested == "auto"
+    assert choice.model == ("dipole" if np.max(np.abs(truth)) <= 0.05 / 4 else "transport")
+    expected = choice.dipole_error if choice.model == "dipole" else choice.transport_error
+    assert choice.predicted_error == pytest.approx(np.max(np.abs(expected)))
+
+
+def test_auto_weighs_the_dipole_against_the_scenes_own_target():
+    coarse = parse_scene(scene_dict(material={"name": "marble"}, render={"texture_size": 64, "accuracy": 0.05}))
+    fine = parse_scene(scene_dict(material={"name": "marble"}, render={"texture_size": 64, "accuracy": 0.01}))
+    assert coarse.material.profile_model == "dipole" and fine.material.profile_model == "transport"
+    assert fine.material.profile.target == 0.01
+    assert "> a quarter of the target (0.25 %)" in plan_scene(fine).describe()
+
+
+def test_a_scene_defaults_to_auto_and_the_plan_says_why():
+    scene = parse_scene(scene_dict(material={"name": "ketchup"}))
+    assert scene.material.profile_model == "transport"
+    text = plan_scene(scene).describe()
+    assert ("profile: transport -- auto: the dipole's R_d is +10.9 / +15.6 / +15.0 % off the transport truth's "
+            "(R / G / B), > a quarter of the target (2.5 %)") in text
+
+
+def test_an_explicit_dipole_is_obeyed_and_its_error_stated():
+    scene = parse_scene(scene_dict(material={"name": "ketchup", "profile": "dipole"}))
+    assert scene.material.profile_model == "dipole"
+    line = plan_scene(scene).profile.describe()
+    assert line.startswith("profile: dipole -- set by the scene; predicted error: the dipole's R_d is +10.9")
+    assert 'profile = "transport" removes it' in line
+
+
+def test_media_the_tables_do_not_cover_fall_back_to_the_dipole_with_the_reason():
+    dense = parse_scene(scene_dict(material={"sigma_a": [0.01] * 3, "sigma_s_prime": [1.0] * 3, "eta": 1.8}))
+    assert dense.material.profile_model == "dipole"
+    assert "transport tables cover eta 1.0-1.6" in dense.material.profile.why
+    untabulated_g = parse_scene(scene_dict(material={"name": "marble", "g": 0.3}))
+    assert untabulated_g.material.profile_model == "dipole"
+    assert "g in (0.0, 0.5, 0.8, 0.9)" in untabulated_g.material.profile.why
+    with pytest.raises(SceneError, match=r"\[material\] profile: transport tables cover eta"):
+        parse_scene(scene_dict(material={"sigma_a": [0.01] * 3, "sigma_s_prime": [1.0] * 3, "eta": 1.8,
+                                         "profile": "transport"}))
+    with pytest.raises(SceneError, match="profile"):
+        parse_scene(scene_dict(material={"name": "marble", "profile": "diffusion"}))
+
+
+def test_replacing_the_medium_chooses_again_and_a_replaced_model_is_a_new_request():
+    ketchup = Material("k", np.full(3, 1.3), medium=materials.material("ketchup"))  # auto at 5 %
+    assert ketchup.profile_model == "transport"
+    dense = dataclasses.replace(ketchup, medium=Medium([0.01] * 3, [1.0] * 3, 1.8))
+    assert dense.profile_model == "dipole" and dense.profile.requested == "auto"
+    back = dataclasses.replace(dense, medium=materials.material("ketchup"))
+    assert back.profile_model == "transport"
+    forced = dataclasses.replace(ketchup, profile_model="dipole")
+    assert forced.profile_model == "dipole" and forced.profile.requested == "dipole"
+    given = Material("given", np.full(3, 1.4), gaussians=GaussianSum(np.ones((1, 3)), np.ones(1)))
+    assert given.profile is None and given.profile_model == "auto"
+
+
+def test_auto_needs_concrete_numbers_under_jit():
+    medium = materials.material("marble")
+
+    def total(sigma_a, model):
+        m = Material("m", np.full(3, 1.5), medium=Medium(sigma_a, medium.sigma_s_prime, medium.eta),
+                     profile_model=model)
+        return m.medium.sigma_a.sum()
+
+    assert np.isfinite(jax.jit(lambda s: total(s, "transport"))(medium.sigma_a))
+    with pytest.raises(ValueError, match="traced"):
+        jax.jit(lambda s: total(s, "auto"))(medium.sigma_a)
+
+
+def test_the_transport_profiles_gaussians_place_its_flux_beyond_a_pixel():
+    """Ketchup's transport profile rises like 1/r at the source (single scattering), which a
+    sum of Gaussians fits poorly in d'Eon's RMS error (weight r R^2): the planner measures it
+    from half a pixel out (inside, the camera sees only the flux, which the fit keeps) and
+    still reports it unreached -- 15 % against 34 % over every radius. What the camera sees is
+    checked another way: the flux inside each radius from one pixel out, exact profile against
+    the plan's Gaussians, is misplaced by less than the profile's half of the target (measured
+    0.3 / 2.2 / 0.9 %)."""
+    scene = parse_scene(flat_plane({"name": "ketchup"}))
+    plan = plan_scene(scene, method="texture-space")
+    material = scene.material
+    assert material.profile_model == "transport"
+    everywhere = choose_variances(material, scene.accuracy / 2)[1]
+    assert plan.profile_error < everywhere
+    assert "target not reachable" in plan.describe()
+    gs = render_profile(material, plan.variances)
+    r = np.geomspace(1e-5, 400, 20000)
+    exact = exact_profile(material, r)
+    dr = np.gradient(r)[:, None]
+    exact_inside = np.cumsum(2 * np.pi * r[:, None] * exact * dr, axis=0)
+    v, w = np.asarray(gs.variances), np.asarray(gs.weights)
+    fitted_inside = (w[None] * (1 - np.exp(-r[:, None, None] ** 2 / (2 * v[None, :, None])))).sum(1)
+    outside = r >= plan.pixel_size
+    misplaced = np.max(np.abs(fitted_inside[outside] - exact_inside[outside]) / exact_inside[-1], axis=0)
+    assert np.all(misplaced < scene.accuracy / 2), misplaced
