@@ -15,29 +15,111 @@ compile again: the geometry is kept while the mesh, camera and lights' positions
 (:mod:`jsss.render.memory`), compiled frames per layout of the geometry
 (:mod:`jsss.render.programs`), and ``prepare_renderer`` readies a scene for a loop over
 materials or light intensities. Imports nothing from :mod:`fitting` or :mod:`measure`.
+
+Every public name is imported on first use (PEP 562), so ``jsss.render.passes`` (the method
+names a command line offers) and the other light modules load without JAX; ``from jsss.render
+import render`` imports what it did before.
 """
 
-from .image_space import SampledProfile, camera_buffers, image_space_exitance
-from .linear_frame import LinearFrame, linear_frame
-from .mesh import Mesh, box, distance_to_rim, fin, load_obj, plane, uv_sphere
-from .methods import (ImageSpace, Lambert, NormalFiltering, PixelPrepared, RenderMethod, TexturePrepared,
-                      TextureSpace)
-from .passes import Method, Pass
-from .planner import PassDecision, Plan, deposit_change, method_config, plan_scene
-from .prepared_renderer import PreparedRenderer, prepare_renderer
-from .profile_blend import ProfileBasis, choose_basis
-from .reference import reference_radiance
-from .renderer import (FrameProgram, RenderParams, RenderResult, frame_program, prepare, render, render_image,
-                       render_params)
-from .scene import Material, Scene, SceneError, load_scene, parse_scene
-from .surface_maps import MapParams, SurfaceMaps
+from __future__ import annotations
+
+import importlib
+import sys
+import types
+
+# The module each public name comes from.
+_SOURCES = {
+    "image_space": ("SampledProfile", "camera_buffers", "image_space_exitance"),
+    "linear_frame": ("LinearFrame", "linear_frame"),
+    "mesh": ("Mesh", "box", "distance_to_rim", "fin", "load_obj", "plane", "uv_sphere"),
+    "methods": ("ImageSpace", "Lambert", "NormalFiltering", "PixelPrepared", "RenderMethod", "TexturePrepared",
+                "TextureSpace"),
+    "passes": ("Method", "Pass"),
+    "planner": ("PassDecision", "Plan", "deposit_change", "method_config", "plan_scene"),
+    "prepared_renderer": ("PreparedRenderer", "prepare_renderer"),
+    "profile_blend": ("ProfileBasis", "choose_basis"),
+    "profile_choice": ("ProfileChoice", "choose_profile"),
+    "reference": ("reference_radiance",),
+    "renderer": ("FrameProgram", "RenderParams", "RenderResult", "frame_program", "prepare", "render", "render_image",
+                 "render_params"),
+    "scene": ("Material", "Scene", "SceneError", "load_scene", "parse_scene"),
+    "surface_maps": ("MapParams", "SurfaceMaps"),
+}
+_MODULE_OF = {name: module for module, names in _SOURCES.items() for name in names}
+
+
+def __getattr__(name: str):
+    if name not in _MODULE_OF:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{_MODULE_OF[name]}", __name__), name)
+    globals()[name] = value  # once: the next look-up does not come here
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
+
+
+class _Package(types.ModuleType):
+    """``jsss.render.linear_frame`` is the function, as when this package imported it eagerly:
+    the import system binds a submodule to its package's attribute of the same name when it
+    first loads it, which would otherwise put the module ``linear_frame`` there."""
+
+    def __setattr__(self, name, value):
+        if name == "linear_frame" and isinstance(value, types.ModuleType):
+            value = value.linear_frame
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
 
 __all__ = [
-    "FrameProgram", "ImageSpace", "Lambert", "LinearFrame", "MapParams", "Material", "Mesh", "Method",
-    "NormalFiltering", "Pass", "PassDecision", "PixelPrepared", "Plan", "PreparedRenderer", "ProfileBasis",
-    "RenderMethod", "RenderParams", "RenderResult", "SampledProfile", "Scene", "SceneError", "SurfaceMaps",
-    "TexturePrepared", "TextureSpace", "box", "camera_buffers", "choose_basis", "deposit_change", "distance_to_rim",
-    "fin", "frame_program", "image_space_exitance", "linear_frame", "load_obj", "load_scene", "method_config",
-    "parse_scene", "plan_scene", "plane", "prepare", "prepare_renderer", "reference_radiance", "render",
-    "render_image", "render_params", "uv_sphere",
+    "FrameProgram",
+    "ImageSpace",
+    "Lambert",
+    "LinearFrame",
+    "MapParams",
+    "Material",
+    "Mesh",
+    "Method",
+    "NormalFiltering",
+    "Pass",
+    "PassDecision",
+    "PixelPrepared",
+    "Plan",
+    "PreparedRenderer",
+    "ProfileBasis",
+    "ProfileChoice",
+    "RenderMethod",
+    "RenderParams",
+    "RenderResult",
+    "SampledProfile",
+    "Scene",
+    "SceneError",
+    "SurfaceMaps",
+    "TexturePrepared",
+    "TextureSpace",
+    "box",
+    "camera_buffers",
+    "choose_basis",
+    "choose_profile",
+    "deposit_change",
+    "distance_to_rim",
+    "fin",
+    "frame_program",
+    "image_space_exitance",
+    "linear_frame",
+    "load_obj",
+    "load_scene",
+    "method_config",
+    "parse_scene",
+    "plan_scene",
+    "plane",
+    "prepare",
+    "prepare_renderer",
+    "reference_radiance",
+    "render",
+    "render_image",
+    "render_params",
+    "uv_sphere",
 ]

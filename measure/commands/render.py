@@ -37,6 +37,7 @@ from ._console import (
     start,
     version,
     write_atomically,
+    write_png,
     write_text,
 )
 
@@ -268,7 +269,6 @@ def _render(args) -> int:
 
 def _render_one(scene_path, output: Path, args, say) -> list[str]:
     import jax.numpy as jnp
-    import matplotlib.image
 
     from jsss.render import SceneError, load_scene, plan_scene, render
     from jsss.render.budget import MAX_SAMPLES
@@ -293,7 +293,7 @@ def _render_one(scene_path, output: Path, args, say) -> list[str]:
     result = render(scene, plan, dtype=jnp.float64 if args.float64 else jnp.float32, time_passes=args.timings)
     check_frame(result.radiance, scene_path)
     image, exposure = tone_map(result.radiance, exposure=scene.exposure)
-    write_atomically(output, lambda tmp: matplotlib.image.imsave(tmp, image, format="png"))
+    write_png(output, image, software=version(PROG))
     written = [str(output)]
     if not args.no_exr:
         exr = output.with_suffix(".exr")
