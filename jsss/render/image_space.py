@@ -58,7 +58,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.integrate import trapezoid as _trapezoid
+from numpy import trapezoid as _trapezoid
 
 from ..diffusion import dipole
 from ..diffusion.sampling import sample_dipole_radius

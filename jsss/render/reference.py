@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.integrate import trapezoid
+from numpy import trapezoid
 
 from .environment import EnvironmentGeometry, environment_irradiance
 from .image_space import camera_buffers
