@@ -328,7 +328,8 @@ def _dipole_bias(result, fit_transport):
 # What a poor channel's result leaves empty (null in JSON, blank in a batch row); the numbers
 # move to "estimate" (issue 37: ketchup's red came out -80 % with chi2/dof 6260, printed in the
 # table like a measurement).
-RESULT_KEYS = ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance", "mean_free_path_mm")
+RESULT_KEYS = ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "sigma_a_table_err",
+               "sigma_s_prime_table_err", "total_reflectance", "mean_free_path_mm")
 
 
 def with_status(table: dict) -> dict:
@@ -376,7 +377,13 @@ def _footer(result, args, table) -> list[str]:
                    f"{each('sigma_a_per_calibration', '.2g')} % (not in the stated errors)")
     scale = (f"scale: pixel {result.pixel_mm:.4g} mm from {source}; every coefficient scales as 1/pixel size, which no "
              "fit can check (measure it: fit-params pixel-size)")
-    return [field, calibration, scale]
+    if table.get("model") == "transport":
+        share = " / ".join(f"{t / e:.0%}" if e else "-" for t, e in zip(table["sigma_a_table_err"], table["sigma_a_err"]))
+        errors = (f"errors: include the transport tables' own Monte Carlo noise ({share} of sigma_a's, {names}); "
+                  "it is the same for every image fitted with these tables")
+    else:
+        errors = "errors: the measurement's noise and the reference's scale only"
+    return [field, calibration, scale, errors]
 
 
 def _plot(result, path):
@@ -540,7 +547,8 @@ def _find_jobs(target, manifest):
     return jobs
 
 
-_ROW_KEYS = ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "total_reflectance", "mean_free_path_mm",
+_ROW_KEYS = ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "sigma_a_table_err",
+             "sigma_s_prime_table_err", "total_reflectance", "mean_free_path_mm",
              "rel_residual", "chi2_reduced", "converged", "quality", "field_diffusion_lengths")
 
 
