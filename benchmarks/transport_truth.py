@@ -264,13 +264,16 @@ def chandrasekhar_check(mi, *, albedo=0.18 / 0.241, spp=4096, chunks=2):
 
 
 def _ours(scene, method, samples=128, off=()):
-    plan = plan_scene(scene, method=method, samples=samples if Method(method) == Method.IMAGE_SPACE else None)
+    """jsss's subsurface radiance of ``scene`` with ``method`` (None: the planner's choice at the
+    scene's accuracy, as a user gets it), the passes that ran, and the method."""
+    image_space = method is not None and Method(method) == Method.IMAGE_SPACE
+    plan = plan_scene(scene, method=method, samples=samples if image_space else None)
     plan = plan.replace(Pass.SPECULAR, False, "subsurface only")
     for name in off:
         plan = plan.replace(name, False, "benchmark: without it")
     passes = ", ".join(name for name in (Pass.SINGLE_SCATTERING, Pass.OBLIQUE_INCIDENCE, Pass.DEPOSIT_DEPTH)
                        if plan.on(name))
-    return render(scene, plan, dtype=jnp.float64).radiance, passes or "none"
+    return render(scene, plan, dtype=jnp.float64).radiance, passes or "none", plan
 
 
 def main(argv=None):
@@ -279,7 +282,8 @@ def main(argv=None):
     parser.add_argument("--spp", type=int, default=512, help="path-tracer samples per pixel per chunk")
     parser.add_argument("--scenes", nargs="*", default=["marble_sphere", "ketchup_plane"])
     parser.add_argument("--profiles", nargs="*", default=["dipole", "transport"], choices=["dipole", "transport"],
-                        help="jsss profile models to compare (the path tracer runs once for all)")
+                        help="jsss profile models to compare (the path tracer runs once for all); the first row "
+                             "is always the scene as a user renders it: the planner's method, profile = auto")
     parser.add_argument("--methods", nargs="*", default=[m.value for m in Method])
     parser.add_argument("--variant", default="auto", choices=["auto", "llvm_ad_rgb", "scalar_rgb"],
                         help="Mitsuba variant (auto: LLVM where it runs, else scalar)")
@@ -327,12 +331,19 @@ def main(argv=None):
                   + " / ".join(f"{100 * x:.1f} %" for x in noise))
             print("| method | profile | passes | ratio R | ratio G | ratio B | rel. RMS R | G | B |")
             print("|---|---|---|---:|---:|---:|---:|---:|---:|")
-            runs = [(method, profile, ()) for profile in args.profiles for method in args.methods]
+            runs = [(None, "auto", ())] + [(method, profile, ()) for profile in args.profiles for method in args.methods]
             # What the two passes for slanted and nearby light change, on the best configuration.
             runs.append((Method.TEXTURE_SPACE, "transport", (Pass.OBLIQUE_INCIDENCE, Pass.DEPOSIT_DEPTH)))
             for method, profile, off in runs:
-                material = dataclasses.replace(scene.material, profile_model=profile)
-                ours, passes = _ours(dataclasses.replace(scene, material=material), method, off=off)
+                material = scene.material if profile == "auto" else dataclasses.replace(
+                    scene.material, profile_model=profile)
+                ours, passes, plan = _ours(dataclasses.replace(scene, material=material), method, off=off)
+                if method is None:  # the defaults: say what the planner chose and what it predicted
+                    chosen = next((e for e in plan.estimates if (e.method, e.knob) == (plan.method, plan.knob)), None)
+                    knob = f"{plan.knob}, " if plan.knob else ""
+                    method = f"default: {plan.method}" + (f" ({knob}predicted {100 * chosen.error:.1f} %)"
+                                                          if chosen else "")
+                    profile = f"auto: {plan.profile.model}" if plan.profile is not None else "auto"
                 ratio = ours[inner].sum(0) / truth[inner].sum(0)
                 # The path tracer's own per-pixel variance (from the chunks) is taken out of the
                 # mean square, so the RMS measures jsss's error, not Mitsuba's noise.
