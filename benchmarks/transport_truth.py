@@ -336,7 +336,7 @@ def main(argv=None):
             runs.append((Method.TEXTURE_SPACE, "transport", (Pass.OBLIQUE_INCIDENCE, Pass.DEPOSIT_DEPTH)))
             for method, profile, off in runs:
                 material = scene.material if profile == "auto" else dataclasses.replace(
-                    scene.material, profile_model=profile)
+                    scene.material, profile_model=profile, profile=None)  # profile=None: a new request
                 ours, passes, plan = _ours(dataclasses.replace(scene, material=material), method, off=off)
                 if method is None:  # the defaults: say what the planner chose and what it predicted
                     chosen = next((e for e in plan.estimates if (e.method, e.knob) == (plan.method, plan.knob)), None)

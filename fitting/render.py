@@ -595,7 +595,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     def plan_for(theta, method=method):
         medium = _medium(theta, eta)
         fit_scene = dataclasses.replace(scene, material=dataclasses.replace(
-            material, medium=medium, profile_model=profile_model, g=g))
+            material, medium=medium, profile_model=profile_model, g=g, profile=None))  # pinned: not auto again
         plan = plan_scene(fit_scene, accuracy=accuracy, method=method, samples=samples)
         if method is None and plan.method == Method.TEXTURE_SPACE:
             # The calibration picks the cheapest knob of a frame's error; a fit needs the profile

@@ -15,6 +15,7 @@ pay the 1.2 s of JAX, equinox and SciPy that importing them all did.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 
 # Each public name and the module it lives in (the attribute of that name, or the module itself).
 _MODULES = {
@@ -53,6 +54,8 @@ def __getattr__(name: str):
         value = getattr(importlib.import_module(_NAMES[name], __name__), name)
     elif name == "__version__":
         value = _version()
+    elif importlib.util.find_spec(f"{__name__}.{name}") is not None:  # a submodule, as the eager imports bound them
+        return importlib.import_module(f".{name}", __name__)
     else:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     globals()[name] = value  # once: the next look-up does not come here

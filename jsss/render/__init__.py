@@ -24,6 +24,7 @@ import render`` imports what it did before.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
 import types
 
@@ -50,7 +51,9 @@ _MODULE_OF = {name: module for module, names in _SOURCES.items() for name in nam
 
 def __getattr__(name: str):
     if name not in _MODULE_OF:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        if importlib.util.find_spec(f"{__name__}.{name}") is None:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        return importlib.import_module(f".{name}", __name__)  # a submodule, as the eager imports bound them
     value = getattr(importlib.import_module(f".{_MODULE_OF[name]}", __name__), name)
     globals()[name] = value  # once: the next look-up does not come here
     return value

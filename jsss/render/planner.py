@@ -75,7 +75,7 @@ from .methods import (
 )
 from .passes import Method, Pass
 from .profile_blend import ProfileBasis, choose_basis
-from .profile_choice import ProfileChoice
+from .profile_choice import ProfileChoice, choose_profile
 from .profiles import choose_variances, full_profile, render_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
@@ -441,7 +441,25 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     config = method_config(method, texture_size=size, taps=7, max_ratio=2.0 if texture_target < 0.15 else 4.0,
                            samples=samples, normal_filter=normal_filter)
     return Plan(ordered, variances, error, config, pixel, method_why=method_why, estimates=estimates, blur_pixels=blur,
-                knob=knob, features=features, basis=basis, profile=material.profile)
+                knob=knob, features=features, basis=basis, profile=_profile_at(material, target))
+
+
+def _profile_at(material, target):
+    """The material's profile choice, flagged where ``auto`` chose for another target than this
+    plan's (``plan_scene(accuracy=...)``, ``--accuracy``): the material, and so the frame, keeps
+    its model; the plan says so and which model this target would take."""
+    choice = material.profile
+    if choice is None or choice.requested != "auto" or np.isclose(choice.target, target):
+        return choice
+    other = choose_profile(material.medium, g=material.g, target=target)
+    if other.model == choice.model:
+        return choice
+    note = (f" [chosen for accuracy {100 * choice.target:.3g} %; at this plan's {100 * target:.3g} % auto would take "
+            f"{other.model}: set [render] accuracy, or profile]")
+    warnings.warn(f"profile: {choice.model} was chosen for accuracy {100 * choice.target:.3g} %, and this plan's "
+                  f"{100 * target:.3g} % would take {other.model}; set the scene's accuracy (or its profile) to change it",
+                  stacklevel=3)
+    return dataclasses.replace(choice, why=choice.why + note)
 
 
 def map_spread_error(scene: Scene, rms: float) -> float:

@@ -54,6 +54,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from .. import layers as _layers
@@ -101,7 +102,9 @@ class Material:
     5 %) and takes the transport tables otherwise; ``"dipole"`` or ``"transport"`` is obeyed.
     Building the material resolves it (:mod:`jsss.render.profile_choice`), so
     ``profile_model`` then names the model used and ``profile`` holds the choice, its reasons
-    and both models' predicted errors (None for a stack, a given profile, or a traced medium). ``maps`` (:class:`SurfaceMaps`) vary
+    and both models' predicted errors (None for a stack, a given profile, or a traced medium).
+    ``dataclasses.replace`` keeps the request: a new medium under ``auto`` is chosen for again;
+    to pin a model, pass ``profile_model=...`` with ``profile=None``. ``maps`` (:class:`SurfaceMaps`) vary
     the material over the surface; ``normalize_profile`` scales the profile's total to 1 per
     channel, so that a colour map alone sets the colour (d'Eon 2007 sec. 5.3).
     """
@@ -137,7 +140,8 @@ class Material:
         kept = self.profile is not None and self.profile_model in (self.profile.model, self.profile.requested)
         requested = self.profile.requested if kept else self.profile_model
         target = self.profile.target if kept else 0.05
-        choice = choose_profile(self.medium, g=self.g, requested=requested, target=target)
+        with jax.ensure_compile_time_eval():  # a concrete medium built inside someone's jit
+            choice = choose_profile(self.medium, g=self.g, requested=requested, target=target)
         object.__setattr__(self, "profile_model", choice.model)
         object.__setattr__(self, "profile", choice)
 
@@ -161,6 +165,17 @@ class Scene:
     source: str = "<scene>"
     method: str | None = None  # [render] method: the scene fixes it; None lets the planner choose
     extras: dict = field(default_factory=dict)
+
+    def with_accuracy(self, accuracy: float) -> Scene:
+        """This scene at another accuracy target, with a ``profile = "auto"`` material chosen
+        again for it (:mod:`jsss.render.profile_choice`; the artist's maps keep the model their
+        coefficients were converted with)."""
+        material, choice = self.material, self.material.profile
+        artist = material.maps is not None and any(key in ARTIST_KEYS for key, _ in material.maps.files)
+        if choice is not None and choice.requested == "auto" and choice.target != accuracy and not artist:
+            material = dataclasses.replace(material, profile_model="auto", profile=ProfileChoice(
+                choice.model, "auto", choice.why, accuracy))
+        return dataclasses.replace(self, accuracy=accuracy, material=material)
 
 
 class _Table:
@@ -621,14 +636,8 @@ def parse_scene(data: dict, *, source: str = "<scene>", base_dir=".", allow_outs
             r.fail("method", f"must be auto, {', '.join(m.value for m in Method)}; got {method!r}.")
     r.check_unknown()
     root.check_unknown()
-    choice = material.profile
-    if choice is not None and choice.requested == "auto" and choice.target != accuracy and material.maps is None:
-        # auto weighs the dipole's error against this scene's target (parameter maps keep the
-        # choice their coefficients were converted with)
-        material = dataclasses.replace(material, profile_model="auto", profile=ProfileChoice(
-            choice.model, "auto", choice.why, accuracy))
-    return Scene(mesh, material, lights, camera, accuracy, texture_size, shadow, exposure, source,
-                 method=None if method == "auto" else method)
+    return Scene(mesh, material, lights, camera, 0.05, texture_size, shadow, exposure, source,
+                 method=None if method == "auto" else method).with_accuracy(accuracy)
 
 
 def load_scene(path, *, allow_outside: bool = False) -> Scene:

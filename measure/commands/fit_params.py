@@ -379,7 +379,7 @@ def _footer(result, args, table) -> list[str]:
              "fit can check (measure it: fit-params pixel-size)")
     if table.get("model") == "transport":
         share = " / ".join(f"{t / e:.0%}" if e else "-" for t, e in zip(table["sigma_a_table_err"], table["sigma_a_err"]))
-        errors = (f"errors: include the transport tables' own Monte Carlo noise ({share} of sigma_a's, {names}); "
+        errors = (f"errors: include the transport tables' own Monte Carlo noise ({share} of sigma_a's standard error, {names}); "
                   "it is the same for every image fitted with these tables")
     else:
         errors = "errors: the measurement's noise and the reference's scale only"

@@ -284,6 +284,8 @@ def _render_one(scene_path, output: Path, args, say) -> list[str]:
         raise SceneError(f"--samples {args.samples}: image-space samples per pixel must lie in [1, {MAX_SAMPLES}] "
                          "(the calibration measures 8, 32 and 128).")
     method = None if args.method == "auto" else Method(args.method)
+    if args.accuracy is not None:
+        scene = scene.with_accuracy(args.accuracy)  # profile = "auto" chooses for it
     say(f"{scene_path}: planning (fits the material's profile)")
     plan = plan_scene(scene, accuracy=args.accuracy, method=method, samples=args.samples,
                       normal_filter=args.normal_filter)

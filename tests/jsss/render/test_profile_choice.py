@@ -141,3 +141,29 @@ def test_the_transport_profiles_gaussians_place_its_flux_beyond_a_pixel():
     outside = r >= plan.pixel_size
     misplaced = np.max(np.abs(fitted_inside[outside] - exact_inside[outside]) / exact_inside[-1], axis=0)
     assert np.all(misplaced < scene.accuracy / 2), misplaced
+
+
+def test_a_pinned_model_survives_a_new_medium_and_auto_follows_the_plans_target():
+    """Review findings: ``replace(..., profile=None)`` pins a model even when auto had chosen
+    the same one; a concrete material built inside someone's jit works; ``with_accuracy``
+    chooses again, ``plan_scene(accuracy=...)`` says that it did not."""
+    marble = parse_scene(scene_dict(material={"name": "marble"}))
+    assert marble.material.profile_model == "dipole"
+    pinned = dataclasses.replace(marble.material, medium=materials.material("ketchup"), profile_model="dipole",
+                                 profile=None)
+    assert pinned.profile_model == "dipole" and pinned.profile.requested == "dipole"
+    medium = materials.material("marble")
+    built = jax.jit(lambda x: (Material("m", np.full(3, 1.5), medium=medium, profile_model="dipole"), x)[1])(1.0)
+    assert built == 1.0
+    assert marble.with_accuracy(0.01).material.profile_model == "transport"
+    with pytest.warns(UserWarning, match="would take transport"):
+        plan = plan_scene(marble, accuracy=0.01)
+    assert plan.profile.model == "dipole" and "at this plan's 1 % auto would take transport" in plan.profile.why
+
+
+def test_submodules_stay_attributes_of_the_lazy_packages():
+    import jsss
+    from jsss import render
+
+    assert jsss.medium.Medium is Medium and render.scene.Material is Material
+    assert callable(render.linear_frame)
