@@ -161,8 +161,10 @@ def _incidence_ratio_numpy(medium: Medium, cos_incident) -> np.ndarray:
     would compute in (the same H iteration, grid and linear interpolation)."""
     sigma_a, sigma_s_prime, eta = (np.asarray(x) for x in (medium.sigma_a, medium.sigma_s_prime, medium.eta))
     albedo = sigma_s_prime / (sigma_a + sigma_s_prime)
-    cos = np.asarray(as_float_array(cos_incident))
     dtype = albedo.dtype
+    # A Python number is weakly typed in JAX: it takes the medium's dtype, not float64.
+    cos = np.asarray(cos_incident, dtype) if isinstance(cos_incident, (int, float)) else \
+        np.asarray(as_float_array(cos_incident))
     n = albedo.ndim
     grid = np.linspace(0.0, 1.0, 257, dtype=dtype)
     # plane_albedo(albedo, grid) by h_function's steps.

@@ -12,8 +12,11 @@ import numpy as np
 import pytest
 
 from jsss.diffusion.incidence import incidence_law, incidence_ratio
-from jsss.diffusion.single_scattering import (_single_and_diffuse, _single_and_diffuse_numpy,
-                                              single_scattering_share)
+from jsss.diffusion.single_scattering import (
+    _single_and_diffuse,
+    _single_and_diffuse_numpy,
+    single_scattering_share,
+)
 from jsss.medium import Medium
 
 MEDIA = [
@@ -30,6 +33,15 @@ def test_incidence_ratio_in_numpy_is_the_jax_law(medium):
         fast = np.asarray(incidence_ratio(medium, cos))
         np.testing.assert_allclose(fast, np.asarray(incidence_law(medium)(cos)), rtol=0, atol=1e-12)
         assert fast.shape == np.shape(cos) + medium.shape
+
+
+def test_incidence_ratio_keeps_a_float32_mediums_dtype_for_a_python_number():
+    """A Python float is weakly typed in JAX: with float64 on, a float32 medium's ratio stays
+    float32 on both paths (the NumPy path returned float64 until the review of 2026-12-04)."""
+    medium = Medium(*(np.asarray(x, np.float32) for x in ([0.061, 0.97, 1.45], [0.18, 0.07, 0.03], [1.3] * 3)))
+    fast, law = incidence_ratio(medium, 0.5), incidence_law(medium)(0.5)
+    assert fast.dtype == law.dtype == jnp.float32
+    np.testing.assert_allclose(fast, law, rtol=1e-5)
 
 
 def test_incidence_ratio_under_jit_and_grad_is_the_jax_law():
