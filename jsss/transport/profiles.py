@@ -179,25 +179,26 @@ def _check(medium: Medium):
                          f"(reduced albedo >= 0.001); got {ratio.tolist()!r}.")
 
 
-def _catmull_rom(position, n):
+def _catmull_rom(position, n, xp=jnp):
     """Indices (..., 4) and weights (..., 4) of a Catmull-Rom spline at fractional node
-    ``position`` on ``n`` uniform nodes.
+    ``position`` on ``n`` uniform nodes; ``xp = numpy`` for tables built once (float64 whatever
+    JAX's precision).
 
     Beyond an end the missing neighbour is extrapolated linearly (P_-1 = 2 P_0 - P_1), not
     repeated: a repeated end node halves the end tangent, which put the total reflectance at
     eta 1.55 (between the last two nodes) 0.9 % low at albedo' 0.5 (against the cubic
     through the nodes and against independent walks). With fewer than 3 nodes: linear."""
-    base = jnp.clip(jnp.floor(position), 0, n - 2)
-    t = jnp.clip(position - base, 0.0, 1.0)  # beyond the end nodes: the end value
+    base = xp.clip(xp.floor(position), 0, n - 2)
+    t = xp.clip(position - base, 0.0, 1.0)  # beyond the end nodes: the end value
     t2, t3 = t * t, t * t * t
     w0, w1 = (-t3 + 2 * t2 - t) / 2, (3 * t3 - 5 * t2 + 2) / 2
     w2, w3 = (-3 * t3 + 4 * t2 + t) / 2, (t3 - t2) / 2
     first, last = base == 0, base == n - 2
     # Fold the phantom node's weight onto the two it is extrapolated from.
-    w1, w2, w0 = jnp.where(first, w1 + 2 * w0, w1), jnp.where(first, w2 - w0, w2), jnp.where(first, 0.0, w0)
-    w2, w1, w3 = jnp.where(last, w2 + 2 * w3, w2), jnp.where(last, w1 - w3, w1), jnp.where(last, 0.0, w3)
-    weights = jnp.stack([w0, w1, w2, w3], axis=-1)
-    index = jnp.clip(base.astype(jnp.int32)[..., None] + jnp.arange(-1, 3), 0, n - 1)
+    w1, w2, w0 = xp.where(first, w1 + 2 * w0, w1), xp.where(first, w2 - w0, w2), xp.where(first, 0.0, w0)
+    w2, w1, w3 = xp.where(last, w2 + 2 * w3, w2), xp.where(last, w1 - w3, w1), xp.where(last, 0.0, w3)
+    weights = xp.stack([w0, w1, w2, w3], axis=-1)
+    index = xp.clip(base.astype(xp.int32)[..., None] + xp.arange(-1, 3), 0, n - 1)
     return index, weights
 
 
@@ -401,19 +402,6 @@ def entry_transmittance(eta):
 # solid angle, which leaves the relative variance as it is; the totals are per photon (A = 1).
 
 
-def _catmull_rom_np(position, n):
-    """:func:`_catmull_rom` in NumPy (float64 whatever JAX's precision), for tables built once."""
-    base = np.clip(np.floor(position), 0, n - 2)
-    t = np.clip(position - base, 0.0, 1.0)
-    t2, t3 = t * t, t * t * t
-    w = np.stack([(-t3 + 2 * t2 - t) / 2, (3 * t3 - 5 * t2 + 2) / 2, (-3 * t3 + 4 * t2 + t) / 2, (t3 - t2) / 2], -1)
-    first, last = (base == 0)[..., None], (base == n - 2)[..., None]
-    w = np.where(first, w + np.array([-1.0, 2.0, -1.0, 0.0]) * w[..., :1], w)
-    w = np.where(last, w + np.array([0.0, -1.0, 2.0, -1.0]) * w[..., 3:], w)
-    index = np.clip(base.astype(int)[..., None] + np.arange(-1, 3), 0, n - 1)
-    return index, w
-
-
 def _at_double_absorption(values, absorption):
     """``values`` (..., n_a) at the absorption nodes, taken to twice each node's a'.
 
@@ -426,7 +414,7 @@ def _at_double_absorption(values, absorption):
     n = rows.shape[-1]
     step = np.log10(absorption[2]) - np.log10(absorption[1])
     position = np.arange(n) + np.log10(2.0) / step
-    index, weight = _catmull_rom_np(position, n)
+    index, weight = _catmull_rom(np.asarray(position, float), n, xp=np)
     out[..., 1:] = np.sum(rows[..., index] * weight, axis=-1)
     beyond = position > n - 1
     out[..., 1:][..., beyond] = rows[..., -1:] + (rows[..., -1:] - rows[..., -2:-1]) * (position[beyond] - (n - 1))
@@ -493,7 +481,7 @@ def noise_slice(eta, *, g: float = 0.0, cos_exit: float | None = None) -> FixedS
     data = _tables()
     eta = np.asarray(eta, float)
     etas = data["etas"]
-    index, weight = _catmull_rom_np((eta - etas[0]) / (etas[1] - etas[0]), etas.size)   # C + (4,)
+    index, weight = _catmull_rom(np.asarray((eta - etas[0]) / (etas[1] - etas[0]), float), etas.size, xp=np)   # C + (4,)
     if cos_exit is None:
         table, bins = _noise_tables()["exitance"][:, _g_index(g)], [0]
     else:
