@@ -32,6 +32,7 @@ import numpy as np
 from ..data.pole_weight_table import TABLE_U, TABLE_WEIGHTS
 from .gaussian_sum import GaussianSum
 from ..medium import Medium
+from ..stored_programs import reusable_program
 from ..diffusion.multipole import choose_n_dipoles, slab_geometry
 from ..numerics import as_float_array, is_concrete
 from ..diffusion.dipole import source_depths
@@ -125,6 +126,7 @@ def _as_channels(medium, *arrays):
     return shape, [jnp.broadcast_to(a, shape).reshape(-1) for a in arrays]
 
 
+@reusable_program()  # traced once across processes where a caller keeps programs (a command's start)
 @jax.jit  # one program: op by op it took 1.2 s per call before a render's first pixel
 def empirical_dipole_fit(medium: Medium) -> GaussianSum:
     r"""The closed-form 8-Gaussian fit of the dipole profile, per channel.

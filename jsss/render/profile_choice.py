@@ -39,6 +39,7 @@ import numpy as np
 from .. import transport
 from ..diffusion import dipole
 from ..medium import Medium
+from ..stored_programs import reusable_program
 
 __all__ = ["MODELS", "ProfileChoice", "choose_profile", "predicted_errors"]
 
@@ -118,6 +119,7 @@ def predicted_errors(medium: Medium, *, g: float = 0.0):
     return diffusion / exact - 1.0, _table_error(medium, g), ""
 
 
+@reusable_program(static_argnames=("g",))
 @functools.partial(jax.jit, static_argnames="g")
 def _totals(medium: Medium, *, g: float):
     """Both models' R_d in one program: every scene load asks for them, and tracing the two

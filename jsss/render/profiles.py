@@ -27,6 +27,7 @@ from ..diffusion import dipole
 from .. import layers as _layers
 from ..gaussians import GaussianSum, empirical_dipole_fit, evaluate, layers_as_gaussians, to_gaussian_sum
 from ..numerics import is_concrete
+from ..stored_programs import reusable_program
 from .kept import save_arrays
 from .scene import Material
 
@@ -230,7 +231,8 @@ def render_profile(material: Material, variances, *, radii=None, medium=None) ->
     return GaussianSum(weights, v)
 
 
-_fit_weights_jitted = jax.jit(_fit_weights)  # one program, not 20 operations each compiled (1.8 s per render)
+# One program, not 20 operations each compiled (1.8 s per render), kept traced across processes.
+_fit_weights_jitted = reusable_program()(jax.jit(_fit_weights))
 
 
 def _numpy_fit(variances, r, reference, resolution: float = 0.0):

@@ -235,7 +235,7 @@ import os, sys, warnings, jax
 from fitting import programs
 from measure.commands._console import enable_caches
 where = enable_caches()
-print(where, jax.config.jax_compilation_cache_dir, programs._folder)
+print(where, jax.config.jax_compilation_cache_dir, programs.stored_programs.folder())
 os.environ["JAX_COMPILATION_CACHE_DIR"] = sys.argv[1] + "/jax"
 print(enable_caches())
 os.environ["JSSS_COMPILATION_CACHE"] = "0"
