@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from dataclasses import dataclass
 
 import equinox as eqx
@@ -52,7 +53,9 @@ class PreparedRenderer:
 
     The plan stays the one made for the scene's own material (its Gaussian variances, its
     passes, its method): another material's profile is fitted on those variances. For a
-    material far from it (another order of mean free path), prepare a renderer for it.
+    material far from it (another order of mean free path), prepare a renderer for it. A
+    material left at ``profile_model = "auto"`` chooses its profile model again for its own
+    medium; where that is not the plan's model, a call warns (pin the model to keep it).
 
     Example
     -------
@@ -136,6 +139,7 @@ class PreparedRenderer:
         if scene.material is self.scene.material:  # the lights' brightness alone: the same geometry and program
             params = eqx.tree_at(lambda p: p.radiant, self.params, light_radiant(scene.lights, self.dtype))
             return np.asarray(self.program(params))
+        _warn_if_other_profile_model(self.plan, scene.material)
         # Another material: its parameters; its geometry is this one (texture space, Lambert) or,
         # where preparing reads the profile or the surface (an image-space disc, filtered normals,
         # roughness), prepared again from the kept rasters; frame_program finds the program.
@@ -143,6 +147,21 @@ class PreparedRenderer:
         params = render_params(scene, self.plan, dtype=self.dtype)
         program = frame_program(method, method.prepare(scene, self.plan, params))
         return np.asarray(program(params))
+
+
+def _warn_if_other_profile_model(plan: Plan, material: Material) -> None:
+    """Warn where ``material`` renders with another profile model than the plan was made for:
+    a material left at ``profile = "auto"`` chooses again for its own medium (ketchup's takes the
+    transport tables, marble's the dipole), and the plan's Gaussian variances, fitted to the
+    other model's profile, may then miss the plan's accuracy target."""
+    planned, chosen = plan.profile, getattr(material, "profile", None)
+    if planned is None or chosen is None or chosen.model == planned.model:
+        return
+    warnings.warn(f"PreparedRenderer: the material renders with the {chosen.model} profile ({chosen.why}), but the "
+                  f"plan's Gaussians were chosen for the {planned.model} profile, so its frames may miss the plan's "
+                  f"accuracy target; prepare a renderer for this material (jsss.render.prepare_renderer), or keep "
+                  f"the plan's model: dataclasses.replace(material, profile_model={planned.model!r}, profile=None).",
+                  UserWarning, stacklevel=4)
 
 
 def prepare_renderer(scene: Scene, plan: Plan | None = None, *, dtype=jnp.float32) -> PreparedRenderer:

@@ -170,3 +170,25 @@ def test_kept_geometry_is_bounded_and_read_only(texture_plan, monkeypatch):
     monkeypatch.setattr(memory, "KEPT_BYTES", 1)
     memory.kept("test", 1, lambda: np.zeros(10))
     assert memory.kept_bytes() == 80
+
+
+def test_the_prepared_renderer_warns_when_a_material_chooses_another_profile_model(texture_plan):
+    """Marble's plan is made for the dipole (auto at 10 %); ketchup's medium, left at auto, takes the
+    transport tables, whose profile the plan's Gaussians were not chosen for: the call warns and
+    names how to keep the plan's model, and a material pinned to it renders without a warning."""
+    import warnings
+
+    from jsss.materials import material as named
+
+    scene, plan = texture_plan
+    assert plan.profile.model == "dipole"
+    renderer = prepare_renderer(scene, plan)
+    ketchup = named("ketchup")
+    switched = dataclasses.replace(scene.material, medium=ketchup)
+    assert switched.profile_model == "transport"
+    with pytest.warns(UserWarning, match="profile_model='dipole'"):
+        renderer(material=switched)
+    pinned = dataclasses.replace(scene.material, medium=ketchup, profile_model="dipole", profile=None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        renderer(material=pinned)
