@@ -75,7 +75,7 @@ from .methods import (
 )
 from .passes import Method, Pass
 from .profile_blend import ProfileBasis, choose_basis
-from .profile_choice import ProfileChoice, choose_profile
+from .profile_choice import ProfileChoice, choose_profile, map_media
 from .profiles import choose_variances, full_profile, render_profile
 from .scene import Scene
 from .texture_space import bake_texels, face_stretch, stretch_variation
@@ -451,7 +451,7 @@ def _profile_at(material, target):
     choice = material.profile
     if choice is None or choice.requested != "auto" or np.isclose(choice.target, target):
         return choice
-    other = choose_profile(material.medium, g=material.g, target=target)
+    other = choose_profile(material.medium, g=material.g, target=target, texels=map_media(material.maps, material.eta))
     if other.model == choice.model:
         return choice
     note = (f" [chosen for accuracy {100 * choice.target:.3g} %; at this plan's {100 * target:.3g} % auto would take "

@@ -25,23 +25,28 @@ predicted error is at most a quarter of the target (marble: -0.9 to -1.2 %, with
 5 %); otherwise the transport tables (ketchup, skin1 at 5 %). Where the tables do not cover
 the medium (eta outside 1.0-1.6, an untabulated ``g``, reduced albedo below 0.001, sigma_s' = 0)
 the dipole is used and the plan says why. An explicit ``profile`` is obeyed, and its predicted
-error is stated.
+error is stated. A material with parameter maps keeps the dipole only where every texel's
+medium would (:func:`map_media`: the checker plane's marble base alone is -1 %, its absorbing
+squares +3 / +17 / +23 %, so it takes the tables).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .. import transport
 from ..diffusion import dipole
 from ..medium import Medium
 from ..stored_programs import reusable_program
+from .surface_maps import ARTIST_KEYS
 
-__all__ = ["MODELS", "ProfileChoice", "choose_profile", "predicted_errors"]
+__all__ = ["MODELS", "ProfileChoice", "choose_profile", "map_media", "predicted_errors"]
 
 MODELS = ("auto", "dipole", "transport")
 
@@ -98,11 +103,11 @@ def _table_error(medium: Medium, g: float) -> np.ndarray:
 
     data = _tables()
     ig = int(np.argmin(np.abs(data["gs"] - g)))
-    eta = np.broadcast_to(np.asarray(medium.eta, float), (3,))
-    ie = np.argmin(np.abs(data["etas"][:, None] - eta[None, :]), axis=0)
-    ratio = np.asarray(medium.sigma_a, float) / np.asarray(medium.sigma_s_prime, float)
-    ia = np.argmin(np.abs(np.log(np.maximum(data["absorption"][:, None], 1e-300)) - np.log(np.maximum(ratio, 1e-300))),
-                   axis=0)
+    ratio = np.asarray(medium.sigma_a, float) / np.asarray(medium.sigma_s_prime, float)  # (3,) or (n, 3)
+    eta = np.broadcast_to(np.asarray(medium.eta, float), ratio.shape)
+    ie = np.argmin(np.abs(data["etas"] - eta[..., None]), axis=-1)
+    ia = np.argmin(np.abs(np.log(np.maximum(data["absorption"], 1e-300)) - np.log(np.maximum(ratio, 1e-300))[..., None]),
+                   axis=-1)
     return data["error_total"][ie, ig, ia] / data["total"][ie, ig, ia]
 
 
@@ -127,13 +132,59 @@ def _totals(medium: Medium, *, g: float):
     return transport.total_reflectance(medium, g=g), dipole.total_reflectance(medium)
 
 
-def choose_profile(medium: Medium, *, g: float = 0.0, requested: str = "auto", target: float = 0.05) -> ProfileChoice:
+MAP_QUANTILES = (0.0, 0.01, 0.5, 0.99, 1.0)  # of a parameter map's reduced albedo, per channel
+
+
+def map_media(maps, eta) -> Medium | None:
+    """Media spanning a parameter map's reduced albedos, or None for no parameter map.
+
+    Coefficient maps only: an artist's maps (diffuse reflectance, mean free path) were turned into
+    coefficients with the model chosen for the base medium, and keep it. A model's R_d error
+    against the transport truth depends on the reduced albedo and eta
+    alone (both models' totals are scale-free), so the map's spread is its albedos' quantiles
+    :data:`MAP_QUANTILES` per channel: a ``(5, 3)`` medium at sigma_s' = 1 [1/mm] (where a
+    texel has no scattering, its albedo is 0 and the tables do not cover it).
+    """
+    if maps is None or maps.sigma_a is None or any(key in ARTIST_KEYS for key, _ in maps.files):
+        return None  # (an artist's maps were converted to coefficients with the model chosen for the base)
+    sigma_a, sigma_s = maps.sigma_a.reshape(-1, 3), maps.sigma_s_prime.reshape(-1, 3)
+    albedo = np.quantile(sigma_s / (sigma_a + sigma_s), MAP_QUANTILES, axis=0)
+    absorption = np.where(albedo > 0, (1 - albedo) / np.maximum(albedo, 1e-300), np.inf)
+    return Medium(jnp.asarray(np.minimum(absorption, 1e300)), jnp.asarray(np.where(albedo > 0, 1.0, 0.0)),
+                  jnp.asarray(np.broadcast_to(np.asarray(eta, float), (3,))))
+
+
+def _over_map(choice: ProfileChoice, texels: Medium, g: float) -> ProfileChoice:
+    """An ``auto`` dipole choice checked over a parameter map's texels: where some texel's dipole
+    error exceeds a quarter of the target, the tables (or, where they do not cover that texel,
+    the dipole with the reason)."""
+    dipole_error, transport_error, reason = predicted_errors(texels, g=g)
+    albedo = np.asarray(texels.sigma_s_prime / (texels.sigma_a + texels.sigma_s_prime))
+    spread = " / ".join(f"{a.min():.3g}-{a.max():.3g}" for a in albedo.T)
+    if dipole_error is None:
+        return dataclasses.replace(choice, why=choice.why + f"; the parameter map's texels (reduced albedo {spread}, "
+                                                            f"R / G / B) reach beyond the tables ({reason})")
+    worst = float(np.max(np.abs(dipole_error)))
+    share = choice.target / 4
+    if worst <= share:
+        return dataclasses.replace(choice, why=choice.why + f"; over the parameter map (reduced albedo {spread}) "
+                                                            f"within {100 * worst:.2g} %")
+    why = (f"auto: over the parameter map's texels (reduced albedo {spread}, R / G / B) the dipole's R_d is up to "
+           f"{100 * worst:.2g} % off the transport truth's, > a quarter of the target ({100 * share:.2g} %); the "
+           f"tables' own error {100 * np.max(transport_error):.2g} %")
+    return ProfileChoice("transport", "auto", why, choice.target, choice.dipole_error, choice.transport_error)
+
+
+def choose_profile(medium: Medium, *, g: float = 0.0, requested: str = "auto", target: float = 0.05,
+                   texels: Medium | None = None) -> ProfileChoice:
     """The profile model for ``medium`` (concrete arrays; Henyey-Greenstein ``g``).
 
     ``requested = "auto"``: the dipole where its predicted error is at most a quarter of
     ``target`` (relative), else the transport tables (module docstring); ``"dipole"`` or
     ``"transport"`` is obeyed, with its predicted error stated (``transport`` where the tables
-    do not cover the medium raises ``ValueError`` naming the value).
+    do not cover the medium raises ``ValueError`` naming the value). ``texels``
+    (:func:`map_media`) is a parameter map's spread: ``auto`` keeps the dipole only where every
+    one of them is within its share too.
     """
     if requested not in MODELS:
         raise ValueError(f"profile must be one of {', '.join(MODELS)}; got {requested!r}.")
@@ -159,4 +210,7 @@ def choose_profile(medium: Medium, *, g: float = 0.0, requested: str = "auto", t
         why = f"set by the scene; predicted error: {dip if model == 'dipole' else tables}"
         if model == "dipole":
             why += " (profile = \"transport\" removes it)"
-    return ProfileChoice(model, requested, why, target, dipole_error, transport_error)
+    choice = ProfileChoice(model, requested, why, target, dipole_error, transport_error)
+    if requested == "auto" and model == "dipole" and texels is not None:
+        return _over_map(choice, texels, g)
+    return choice

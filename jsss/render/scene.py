@@ -70,7 +70,7 @@ from .environment import Environment
 from .lighting import Light
 from .passes import Method
 from .profile_choice import MODELS as PROFILE_MODELS
-from .profile_choice import ProfileChoice, choose_profile
+from .profile_choice import ProfileChoice, choose_profile, map_media
 from .raster import PerspectiveView
 from .surface_maps import (
     ARTIST_KEYS,
@@ -141,7 +141,8 @@ class Material:
         requested = self.profile.requested if kept else self.profile_model
         target = self.profile.target if kept else 0.05
         with jax.ensure_compile_time_eval():  # a concrete medium built inside someone's jit
-            choice = choose_profile(self.medium, g=self.g, requested=requested, target=target)
+            choice = choose_profile(self.medium, g=self.g, requested=requested, target=target,
+                                    texels=map_media(self.maps, self.eta))
         object.__setattr__(self, "profile_model", choice.model)
         object.__setattr__(self, "profile", choice)
 

@@ -167,3 +167,33 @@ def test_submodules_stay_attributes_of_the_lazy_packages():
 
     assert jsss.medium.Medium is Medium and render.scene.Material is Material
     assert callable(render.linear_frame)
+
+
+def test_auto_checks_a_parameter_maps_texels_not_only_its_base():
+    """A marble base with a checker of an absorbing medium (examples/checker_plane.toml's): the
+    base alone keeps the dipole, but at the absorbing texels the dipole's R_d is 3-23 % off, as
+    adding-doubling confirms, so auto takes the tables and says why. A map of marble's own
+    values keeps the dipole; an artist's map keeps the base's choice (its coefficients were
+    converted with that model)."""
+    from jsss.render.surface_maps import SurfaceMaps
+
+    marble = materials.material("marble")
+    absorbing = Medium(np.array([0.06, 0.25, 0.4]), np.asarray(marble.sigma_s_prime), marble.eta)
+    truth = np.asarray(dipole.total_reflectance(absorbing)) / _adding_doubling_total(absorbing) - 1
+    assert np.max(np.abs(truth)) > 0.05  # the absorbing texels really are beyond a quarter of 5 %
+    checker = (np.indices((8, 8)).sum(0) % 2).astype(bool)[..., None]
+    sigma_a = np.where(checker, np.asarray(absorbing.sigma_a), np.asarray(marble.sigma_a))
+    sigma_s = np.broadcast_to(np.asarray(marble.sigma_s_prime), sigma_a.shape)
+
+    def built(files, a=sigma_a):
+        maps = SurfaceMaps(sigma_a=a, sigma_s_prime=sigma_s, files=files)
+        return Material("m", np.broadcast_to(np.asarray(marble.eta, float), (3,)).copy(), medium=marble, maps=maps)
+
+    textured = built((("sigma_a", "checker.exr"),))
+    assert textured.profile_model == "transport"
+    assert "over the parameter map's texels" in textured.profile.why
+    worst = float(textured.profile.why.split("up to ")[1].split(" %")[0]) / 100
+    assert worst == pytest.approx(np.max(np.abs(truth)), rel=0.15)  # the predicted worst texel, against the truth
+    uniform = built((("sigma_a", "marble.exr"),), a=np.broadcast_to(np.asarray(marble.sigma_a), sigma_a.shape))
+    assert uniform.profile_model == "dipole" and "over the parameter map" in uniform.profile.why
+    assert built((("diffuse_reflectance", "painted.exr"),)).profile_model == "dipole"
