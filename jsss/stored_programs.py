@@ -94,10 +94,12 @@ def stored_program(function, *, name: str, identity, packages=("jsss",)):
             return function(*args, **kwargs)
         return _call(function, name, (name, identity), tuple(packages), args, kwargs, {})
 
+    if hasattr(function, "_cache_size"):  # the jitted function's own count of traces (tests read it)
+        wrapper._cache_size = function._cache_size
     return wrapper
 
 
-_loaded: dict = {}  # key -> jax.export.Exported, for the life of the process
+_loaded: dict = {}  # key -> (jax.export.Exported, output tree structure), for the life of the process
 
 
 def _call(function, name, identity, packages, args, kwargs, static):
