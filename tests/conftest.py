@@ -42,3 +42,14 @@ def pytest_collection_modifyitems(config, items):
     xdist workers sit idle. The order of everything else is kept."""
     first = ("test_notebooks.py", "test_readme.py")
     items.sort(key=lambda item: item.path.name not in first)
+
+
+def pytest_runtest_teardown(item):
+    """A console command run in this process (``main([...])``) turns on the store of traced
+    programs for the process; the next test must see the library's default (off), or it would
+    read frames and fits through stored programs that its assertions do not expect."""
+    import sys
+
+    store = sys.modules.get("jsss.stored_programs")
+    if store is not None:
+        store.keep_programs_in(None)
