@@ -69,6 +69,11 @@ PHOTO.fit.toml (the scene with the fitted material, which jsss-render renders as
 rest of the scene file is kept, comments included) and PHOTO.fit.png (photo, fit and whitened
 residual side by side). Exit status 2 on bad input (one line).
 
+A photo taken through the surface holds the specular highlight, whose pixels would steer the
+fit if the scene's roughness were wrong: --highlight fit fits the roughness (the default where
+the highlight is in view under point or directional lights), --highlight mask leaves its pixels
+out, --highlight model holds it at the scene's roughness. The table and JSON say which was done.
+
 The photo's exposure must come from somewhere, since its brightness is gain x R_d:
 * a white or grey target of known reflectance, photographed with the same camera and light
   (flags: --reference-scene CARD.toml [--reference-photo REF.exr] [--reference-reflectance]), in
@@ -176,6 +181,11 @@ def _fit_parser(commands, methods):
     exposure.add_argument("--fit-gain", action="store_true",
                           help="fit the gain (unresolved from R_d unless the photo pins it)")
     p.add_argument("--no-specular", action="store_true", help="the photo holds subsurface light only")
+    p.add_argument("--highlight", choices=("auto", "fit", "mask", "model"), default="auto",
+                   help="the specular highlight in the photo: fit its Beckmann roughness, mask its pixels (where it "
+                        "may be wrong by 2 %% or more of the light for a roughness within 2x of the scene's), or model it at "
+                        "the scene's roughness; auto (default): fit where the highlight is in the photo and the "
+                        "lights are point or directional, else mask")
     p.add_argument("--rim-mm", type=float, default=0.0,
                    help="leave out pixels within this distance [mm] of an open surface's rim (default 0)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
@@ -419,7 +429,7 @@ def _fit(args) -> int:
     t0 = time.perf_counter()
     result = fit_render(scene, photo, noise=noise, loss=args.loss, mask=mask, saturation=args.saturation, method=method,
                         accuracy=args.accuracy, profile_model=args.profile, g=args.g, gain=gain, gain_err=gain_err,
-                        specular=not args.no_specular, rim_mm=args.rim_mm,
+                        specular=not args.no_specular, highlight=args.highlight, rim_mm=args.rim_mm,
                         progress=lambda line: say(f"{args.scene}: {line}"))
     seconds = time.perf_counter() - t0
     out = Path(args.output)
@@ -428,7 +438,8 @@ def _fit(args) -> int:
                                   "exposure": exposure}
     material = scene.material
     fitted = fitted_material(result.medium, profile=summary["profile_model"],
-                             g=material.g if args.g is None else args.g, roughness=material.roughness,
+                             g=material.g if args.g is None else args.g,
+                             roughness=result.roughness if result.highlight == "fit" else material.roughness,
                              specular=material.specular,
                              comment=f"fitted by jsss-render fit ({summary['profile_model']} profile, "
                                      f"{summary['method']}); errors in the .fit.json")
@@ -452,6 +463,11 @@ def _fit(args) -> int:
         for name, values, errors in rows:
             print(f"  {name:<20}" + "  ".join(f"{v:.5g} +- {e:.2g}" for v, e in zip(values, errors)))
         print(f"  {'gain':<20}{summary['gain']:.5g} +- {summary['gain_err']:.2g} ({exposure})")
+        print(f"  {'highlight':<20}" + {
+            "fit": f"roughness fitted: {result.roughness:.4g} +- {result.roughness_err:.2g}",
+            "mask": f"masked: {result.highlight_pixels} pixels left out",
+            "model": f"modelled at the scene's roughness {result.roughness:g}, held",
+            "none": "none in the fit (--no-specular or the scene's specular = 0)"}[result.highlight])
     print("wrote " + ", ".join(str(p) for p in [*files, figure]), file=sys.stderr if args.json else sys.stdout)
     if result.gain_unresolved:
         print(f"{args.prog}: error: the exposure is unresolved, so R_d and sigma_a are not measurements: add a white "
