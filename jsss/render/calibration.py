@@ -1,10 +1,15 @@
 """The measured accuracy and cost of each rendering method, and predictions from them.
 
-``benchmarks/methods.py --calibrate`` renders the example scenes (near, and far with the
+``benchmarks/methods.py --calibrate`` renders the calibration scenes (near, and far with the
 camera moved back) with every method and knob, measures each frame's error against a
-brute-force surface integral of the exact profile and its time, and writes
-``jsss/data/calibration.json``. The planner reads that table; nothing here is a
-tuned constant.
+brute-force surface integral of the transport truth's profile (the transport tables wherever
+they cover the medium, a stack's layered profile; ``jsss.render.reference``) and its time,
+and writes ``jsss/data/calibration.json``. The frames render with the profile the scene's
+``profile = "auto"`` picks, so an error holds the method's own error, its Gaussian fit of that
+profile and, where auto keeps the dipole, the dipole's distance from transport (until
+2026-12-04 the reference integrated the frame's own, then dipole, profile: a consistency
+check that never saw how a few Gaussians follow the transport profile's 1/r core). The
+planner reads that table; nothing here is a tuned constant.
 
 The error of a method depends on what the frame shows, described by
 :class:`FrameFeatures`, all independent of the image's resolution:
@@ -257,8 +262,9 @@ def leave_one_scene_out(rows, target: float) -> list[dict]:
     For every frame of every scene: each (method, knob)'s predicted error beside its measured
     one, and the method the planner would choose at ``target`` with that choice's measured
     error. Returns one dict per frame: ``scene``, ``features``, ``chosen`` (method, knob),
-    ``predicted`` and ``measured`` (of the choice), ``meets`` (measured <= target), and
-    ``errors``: {(method, knob): (predicted, measured)}.
+    ``predicted`` and ``measured`` (of the choice), ``meets`` (measured <= target), ``alike``
+    (whether the choice's prediction rests on alike frames rather than the pessimistic
+    fallback), ``basis`` (its one-line reason) and ``errors``: {(method, knob): (predicted, measured)}.
     """
     rows = tuple(rows)
     out = []
@@ -279,6 +285,7 @@ def leave_one_scene_out(rows, target: float) -> list[dict]:
             truth = measured[(chosen.method, chosen.knob)].error
             out.append(dict(scene=scene, features=frame[0].features, chosen=(chosen.method, chosen.knob),
                             predicted=chosen.error, measured=truth, meets=truth <= target,
+                            alike=not chosen.basis.startswith("no alike"), basis=chosen.basis,
                             errors={(e.method, e.knob): (e.error, measured[(e.method, e.knob)].error)
                                     for e in estimates}))
     return out

@@ -1,8 +1,10 @@
 """Render one scene with every method and knob and measure each against the reference.
 
 Used by ``benchmarks/methods.py`` (the accuracy-vs-time table and the planner's
-calibration table) and by ``notebooks/methods.py``. Frames are diffuse only (the
-specular lobe is the same in every method) and timed per frame after compilation (median
+calibration table) and by ``notebooks/methods.py``. The default reference is the transport
+truth (``reference_radiance(profile_model="transport")``): the frames render with the
+scene's own profile, and their error includes its distance from transport. Frames are
+diffuse only (the specular lobe is the same in every method) and timed per frame after compilation (median
 of ``repeats``); one-time geometry work (rasterizing, shadow maps, the Laplacian's
 eigenvectors) is reported apart as ``prep_ms``; the part of it only that method does is the
 calibration row's ``prep_ms``.
@@ -68,7 +70,7 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
     Returns (reference, list of MethodFrame). ``progress`` (callable of a str) hears each frame.
     """
     if reference is None:
-        reference = reference_radiance(scene, samples=reference_samples)
+        reference = reference_radiance(scene, samples=reference_samples, profile_model="transport")
     frames = []
     for method, knobs in variants:
         plan = plan_scene(scene, method=method, **knobs)

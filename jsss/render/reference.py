@@ -8,7 +8,9 @@ For each visible pixel's surface point :math:`x`,
 
 with :math:`N` points :math:`y_j` spread uniformly by area over every triangle (seen or
 not), :math:`E(y_j)` from the same shadow maps as the renderer, and :math:`R` the *exact*
-profile (dipole, multilayer stack or the given Gaussians; not a fit). The disc of radius
+profile (dipole, multilayer stack or the given Gaussians; not a fit; with
+``profile_model="transport"`` a homogeneous medium's transport profile wherever the tables
+cover it, whatever model the frame renders with). The disc of radius
 :math:`r_c` (three sample spacings) around :math:`x` is integrated in its tangent plane
 with :math:`E(x)`: the profile's sharp core is far narrower than the spacing of any
 affordable sample set. Unlike the renderer's methods this sees the whole surface, so it
@@ -18,6 +20,7 @@ evaluations -- a reference, not a renderer.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import jax
@@ -32,7 +35,7 @@ from .profiles import exact_profile
 from .scene import Scene
 from .shading import diffuse_radiance
 
-__all__ = ["ReferenceFrame", "reference_radiance", "surface_samples", "white_lambertian_radiance"]
+__all__ = ["ReferenceFrame", "reference_radiance", "surface_samples", "truth_material", "white_lambertian_radiance"]
 
 
 def white_lambertian_radiance(scene: Scene) -> np.ndarray:
@@ -59,13 +62,15 @@ def white_lambertian_radiance(scene: Scene) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class ReferenceFrame:
-    """Diffuse radiance (H, W, 3) and its own Monte Carlo error (relative RMS, from two halves)."""
+    """Diffuse radiance (H, W, 3) and its own Monte Carlo error (relative RMS, from two halves);
+    ``profile``: what was integrated (``"dipole"``, ``"transport"``, ``"layers"``, ``"gaussians"``)."""
 
     radiance: np.ndarray
     mask: np.ndarray
     noise: float
     samples: int
     near_radius: float
+    profile: str = ""
 
 
 def surface_samples(mesh, count: int, *, seed: int = 0):
@@ -100,13 +105,40 @@ def _tabulated_profile(material, r_max):
     return r, values
 
 
+def truth_material(material, profile_model: str | None = "transport"):
+    """``material`` with its homogeneous medium's profile pinned to ``profile_model`` where it applies.
+
+    ``"transport"`` applies where :mod:`jsss.transport`'s tables cover the medium (its eta,
+    ``g``, albedo); a stack, a Gaussian sum, a medium the tables do not cover, or ``None``
+    keep the material's own profile. Returns (material, the profile it integrates).
+    """
+    if material.layers:
+        return material, "layers"
+    if material.gaussians is not None or material.medium is None:
+        return material, "gaussians"
+    if profile_model is None or profile_model == material.profile_model:
+        return material, material.profile_model
+    if profile_model == "transport":
+        from .. import transport
+
+        try:
+            transport.check_medium(material.medium, g=material.g)
+        except ValueError:
+            return material, material.profile_model
+    return dataclasses.replace(material, profile_model=profile_model, profile=None), profile_model
+
+
 def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, chunk: int = 128,
-                       oblique: bool | None = None) -> ReferenceFrame:
+                       oblique: bool | None = None, profile_model: str | None = None) -> ReferenceFrame:
     """The diffuse radiance of ``scene`` by brute-force surface integration (float64 if enabled).
 
     ``oblique``: scale the irradiance by the oblique-incidence law (:mod:`jsss.diffusion.incidence`);
     default: where the planner would at the scene's accuracy, so that a frame is compared
-    with the same physics it was planned to simulate.
+    with the same physics it was planned to simulate (the deposit-depth pass likewise).
+    ``profile_model``: ``None`` integrates the material's own profile; ``"transport"`` the
+    transport tables' wherever they cover the medium (:func:`truth_material`), the truth the
+    planner's calibration measures every method against, the frame's Gaussian fit of its own
+    model included.
     """
     from .planner import deposit_depth_decision, oblique_incidence_decision
 
@@ -128,15 +160,21 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
                      for light, m in zip(scene.lights, maps)]
     E_samples = np.asarray(irradiance(sample_lights, radiant, eta, medium=oblique_medium, deposit=deposit_medium))
     lo, hi = mesh.bounds
-    r, table = _tabulated_profile(material, 2 * float(np.linalg.norm(hi - lo)))
+    integrated, profile_name = truth_material(material, profile_model)
+    r, table = _tabulated_profile(integrated, 2 * float(np.linalg.norm(hi - lo)))
     near = 3 * np.sqrt(area / samples)
     inside = r <= near
     core = trapezoid(table[inside] * 2 * np.pi * r[inside, None], r[inside], axis=0)  # (3,)
-    log_r, log_table = jnp.log(jnp.asarray(r[1:])), jnp.log(jnp.asarray(table[1:]))
+    log_table = jnp.log(jnp.asarray(table[1:]))
+    n, log_first, log_step = len(r) - 1, float(np.log(r[1])), float(np.log(r[-1] / r[1]) / (len(r) - 2))
 
     def profile(d):
-        ld = jnp.log(jnp.maximum(d, r[1]))[..., None]
-        return jnp.exp(jax.vmap(lambda t: jnp.interp(ld[..., 0], log_r, t), in_axes=1, out_axes=-1)(log_table))
+        # Linear in log R over log r, as jnp.interp would, but the radii are evenly spaced in
+        # log r, so the interval is found by arithmetic instead of a search: 1.8x faster.
+        x = jnp.clip((jnp.log(jnp.maximum(d, r[1])) - log_first) / log_step, 0.0, n - 1.0)
+        i = jnp.minimum(jnp.floor(x).astype(jnp.int32), n - 2)
+        t = (x - i)[..., None]
+        return jnp.exp(log_table[i] * (1 - t) + log_table[i + 1] * t)
 
     ys, Es = jnp.asarray(position), jnp.asarray(E_samples)
     half = (samples + 1) // 2  # even-index points
@@ -164,4 +202,4 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     exitance = exitance.reshape(buffers.mask.shape + (3,))
     cos_view = (buffers.normal * buffers.view).sum(-1)
     L = np.asarray(diffuse_radiance(jnp.asarray(exitance), jnp.asarray(cos_view), eta)) * buffers.coverage[..., None]
-    return ReferenceFrame(L, buffers.mask, noise, samples, float(near))
+    return ReferenceFrame(L, buffers.mask, noise, samples, float(near), profile_name)

@@ -184,14 +184,21 @@ def test_shipped_table_picks_a_cheaper_method_for_a_looser_target_and_says_why()
 
 
 def test_shipped_table_follows_the_measured_errors_of_a_front_lit_sphere():
-    """The marble sphere from its own camera (96 x 72 and 320 x 240 alike): Lambert measured
-    2.6 % there, so it does for 5 %; for 2 % the cheapest method predicted to meet it (the
-    spectral normal filter at 1.4 % or texture space, by the pixels to process). From 20x as far the profile spans a fraction of a pixel, and the prediction
-    rests on the far frames (checks the shipped table: rerunning the calibration may move
-    these numbers, and this test says so)."""
+    """The marble sphere from its own camera: at the calibration's 96 x 72 Lambert measured
+    2.4 % and is the cheapest, so it does for 5 %. At 320 x 240 (and for 2 % at both) the
+    choice is the cheapest method predicted to meet the target, which depends on the time
+    model: since 2026-12-04 a homogeneous medium's Lambert frame holds the oblique-incidence
+    law's H solve (about 1 ms, the same at any resolution), which the planner scales with the
+    pixels, so at 320 x 240 texture space on its 64^2 texels is predicted cheaper. From 20x as
+    far the profile spans a fraction of a pixel, and the prediction rests on the far frames
+    (checks the shipped table: rerunning the calibration may move these numbers, and this test
+    says so)."""
     for resolution in ([96, 72], [320, 240]):
         near = parse_scene(scene_dict(camera={"position": [0.0, -110.0, 30.0], "fov": 28, "resolution": resolution}))
-        assert plan_scene(near, accuracy=0.05).method == "lambert"
+        loose = plan_scene(near, accuracy=0.05)
+        chosen = next(e for e in loose.estimates if (e.method, e.knob) == (loose.method, loose.knob))
+        assert chosen.error <= 0.05 and all(e.error > 0.05 for e in loose.estimates if e.ms < chosen.ms)
+        assert loose.method == "lambert" or resolution == [320, 240]
         tight = plan_scene(near, accuracy=0.02)
         chosen = next(e for e in tight.estimates if (e.method, e.knob) == (tight.method, tight.knob))
         assert tight.method != "lambert" and chosen.error <= 0.02
