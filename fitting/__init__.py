@@ -18,6 +18,9 @@ _HOME = {
     "MediumFit": "medium",
     "fit_medium": "medium",
     "RenderFitError": "render",
+    "AlbedoMapFit": "albedo_map",
+    "AlbedoMapError": "albedo_map",
+    "fit_albedo_map": "albedo_map",
 }
 
 __all__ = sorted(_HOME)

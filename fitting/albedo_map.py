@@ -1,0 +1,677 @@
+r"""Recover a per-texel colour (albedo) map and one mean free path per channel from photos.
+
+The scene's material is a homogeneous medium under texture-space diffusion (d'Eon, Luebke,
+Enderton 2007 sec. 5) with a colour map :math:`c(x)` (:mod:`jsss.render.surface_maps`; with
+``texturing = "pre-post"``, :math:`M = \sqrt{c}\,R * (\sqrt{c}\,E)`). A photo's pixels
+:math:`I_p` are fitted by :math:`g\,L_p(c, \ell)`, the renderer's own texture-space frame, with
+
+* :math:`u = \ln c` per map texel and channel (the map stays positive; one unknown per texel),
+* :math:`\ell_k = \ln \mathrm{mfp}_k` per channel, the medium's mean free path
+  :math:`1/\sigma_t'` [mm], with its reduced albedo :math:`\alpha' = \sigma_s'/\sigma_t'` held at the
+  scene's. For the dipole :math:`R_d` depends on :math:`\alpha'` (and :math:`\eta`) alone, so this
+  holds the medium's total reflectance: a change of mean free path only rescales the profile in
+  space, :math:`R(r) = \mathrm{mfp}^{-2} f(r/\mathrm{mfp})`. That removes the degeneracy between the
+  map's scale and the medium's own :math:`R_d` (the map carries the colour, relative to the held
+  medium), and the exposure ``gain`` must be given for the same reason (brightness is
+  gain x map x R_d; a reference's relative error ``gain_err`` is added to every texel's error in
+  quadrature: it moves the whole map together).
+
+The model reuses the renderer's stages (:class:`jsss.render.methods.TextureSpace`): the
+irradiance at a white map, the texel geometry, the blur chain and the texel-to-pixel lookup are
+computed once per fit; each evaluation takes the colour layer on the way in
+(:meth:`~jsss.render.methods.TextureSpace.surface`), the blur
+(:meth:`~jsss.render.methods.TextureSpace.diffusion`), the weights of the render profile for the
+mean free path on the plan's fixed variances (:func:`jsss.render.profiles.render_profile`, as
+:func:`fitting.render.fit_render` does), the colour layer on the way out
+(:meth:`~jsss.render.methods.TextureSpace.texel_exitance`) and the camera pass (single scattering
+under the map, specular held). What else depends on the medium (the oblique-incidence law, the
+deposit depth) is held at the start's; the fit re-plans when the fitted mean free path moves the
+planner's variances.
+
+Solver: Gauss-Newton on the whitened residuals :math:`r = (g L - I)/s`, each step's normal
+equations :math:`J^T J\,\delta = -J^T r` solved by conjugate gradients (:class:`lineax.CG`)
+on :math:`v \mapsto J^T (J v)` from :func:`jax.linearize` and its transpose: the Jacobian is never
+formed. A Jacobi preconditioner (texels: the pixels each texel covers weighted by
+:math:`(L/s)^2`; mean free paths: their exact diagonal, one JVP) and a halving line search.
+
+Uncertainty: the covariance is :math:`s^2 (J^T J)^{-1}` with :math:`s^2 = \max(1, \chi^2/\nu)`
+(:mod:`fitting.statistics`). Its diagonal is estimated by *probing* (``errors="probe"``): the map
+texels are coloured in a ``probe_spacing`` x ``probe_spacing`` lattice; for each colour one CG
+solve :math:`x = (J^T J)^{-1} v` with :math:`v` random signs :math:`\epsilon_i` on that colour's
+texels (all three channels at once: the channels do not couple), and
+:math:`\epsilon_i x_i` estimates :math:`(J^T J)^{-1}_{ii}` without bias; its scatter comes from
+the inverse's entries between texels ``probe_spacing`` apart, which the profile's local support
+makes small. The mean free paths' variances are exact (one solve). ``errors="exact"`` forms
+:math:`J` (by forward mode, one column per unknown) and inverts :math:`J^T J`: for small maps,
+and what the tests check the probe against.
+
+Texels the camera does not see (the fitted pixels' bilinear lookup weight on them below
+``min_pixels``) are not fitted: they keep the start (the seen texels' median), their error is
+infinite, and ``seen`` is false there.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import numbers
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+from jax.flatten_util import ravel_pytree
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+
+from fitting.render import RenderFitError, estimate_noise, fit_pixels
+from fitting.statistics import error_scale, reduced_chi2
+from jsss.medium import Medium
+from jsss.render import Material, Method, Pass, Scene, plan_scene, render_params
+from jsss.render.methods.base import entry_irradiance
+from jsss.render.profiles import _radii, full_profile, render_profile
+from jsss.render.surface_maps import SurfaceMaps
+
+__all__ = ["AlbedoMapError", "AlbedoMapFit", "fit_albedo_map"]
+
+
+# Re-plan (and recompile) only when a Gaussian's variance moved by more: the weights are refitted
+# for the estimate on the fixed variances, whose geometric spacing (about 2.6x) leaves room
+VARIANCE_REPLAN = 0.25
+MFP_REFRESH = 0.003  # refresh the frame for the estimate when ln mfp moved by more in a round
+
+
+class AlbedoMapError(RenderFitError):
+    """The scenes, photos or options cannot be fitted; the message names the value and the fix."""
+
+
+@dataclass(frozen=True, eq=False)
+class AlbedoMapFit:
+    """Result of :func:`fit_albedo_map`.
+
+    Attributes
+    ----------
+    albedo : ndarray (H_m, W_m, 3)
+        The colour map in texel order (rows increase with v, as :class:`SurfaceMaps` stores it);
+        values above 1 mean the held medium is darker than the photo (its R_d too low).
+    albedo_err : ndarray (H_m, W_m, 3)
+        One-sigma standard errors; ``inf`` where not ``seen``.
+    seen : ndarray (H_m, W_m) of bool
+        The texels fitted (the camera's fitted pixels look them up with weight >= ``min_pixels``).
+    mean_free_path, mean_free_path_err : ndarray (3,) [mm]
+        :math:`1/\\sigma_t'` per channel and its error.
+    medium : Medium
+        The fitted medium (reduced albedo held at the scene's).
+    chi2_reduced : float
+        chi^2 per degree of freedom of the whitened residuals.
+    converged : bool; steps : int
+        Gauss-Newton met its tolerance; Gauss-Newton steps (all rounds).
+    images : tuple of ndarray (H, W, 3)
+        Each photo's fitted render, gain applied.
+    masks : tuple of ndarray (H, W) of bool
+        The pixels fitted in each photo.
+    sigma : tuple of ndarray (H, W, 3)
+        Each pixel's standard error as fitted.
+    errors : str
+        How the errors were computed ("probe", "exact" or "none").
+    cg_steps : int
+        Conjugate-gradient iterations, all solves together.
+    warnings, history : tuple of str
+    """
+
+    albedo: np.ndarray
+    albedo_err: np.ndarray
+    seen: np.ndarray
+    mean_free_path: np.ndarray
+    mean_free_path_err: np.ndarray
+    medium: Medium
+    chi2_reduced: float
+    converged: bool
+    steps: int
+    images: tuple
+    masks: tuple
+    sigma: tuple
+    errors: str
+    cg_steps: int
+    warnings: tuple = ()
+    history: tuple = ()
+
+    @property
+    def image(self) -> np.ndarray:
+        """The first photo's fitted render."""
+        return self.images[0]
+
+
+def _check_gain(gain, gain_err, n_views):
+    if gain is None:
+        raise AlbedoMapError("gain: the photo's exposure is required (photo value per unit linear radiance; 1 for a "
+                             "calibrated camera, or fitting.render.gain_from_reference): brightness is gain x map x R_d "
+                             "and the map would absorb any error in it.")
+    if isinstance(gain, str) or isinstance(gain, bool | np.bool_):
+        raise AlbedoMapError(f"gain must be a positive number (or one per photo); got {gain!r}. Fitting it is not "
+                             "possible here: it is one direction with the map's scale.")
+    gains = np.broadcast_to(np.asarray(gain, float), (n_views,)) if np.ndim(gain) == 0 else np.asarray(gain, float)
+    if gains.shape != (n_views,) or not np.all(np.isfinite(gains) & (gains > 0)):
+        raise AlbedoMapError(f"gain must be a positive number or one per photo ({n_views}); got {gain!r}.")
+    gain_err = float(gain_err)
+    if not (np.isfinite(gain_err) and gain_err >= 0):
+        raise AlbedoMapError(f"gain_err must be >= 0 (the gain's relative standard error); got {gain_err!r}.")
+    return gains, gain_err
+
+
+def _check_scene(scene: Scene, mesh):
+    material = scene.material
+    if material.kind != "medium":
+        raise AlbedoMapError(f"{scene.source}: fit_albedo_map needs a homogeneous medium under its colour map; the "
+                             f"material is {material.kind} (give sigma_a, sigma_s_prime and eta).")
+    if material.maps is not None and material.maps.parametric:
+        raise AlbedoMapError(f"{scene.source}: [material.maps] has parameter maps (sigma_a ...); remove them: the "
+                             "colour map (albedo) is what is fitted.")
+    if material.normalize_profile:
+        raise AlbedoMapError(f"{scene.source}: normalize_profile is set; remove it (the fit holds the medium's own "
+                             "R_d and lets the map carry the colour).")
+    if not scene.lights:
+        raise AlbedoMapError(f"{scene.source}: the scene has no lights; an unlit photo constrains no map.")
+    if mesh is not None and (scene.mesh.uvs.shape != mesh.uvs.shape or not np.array_equal(scene.mesh.uvs, mesh.uvs)):
+        raise AlbedoMapError(f"{scene.source}: every (scene, photo) pair must share one mesh and UV layout (the map "
+                             "is one texture); this scene's differs from the first's.")
+
+
+def _medium(ell, albedo, eta):
+    """The medium of log mean free paths ``ell`` (3,) at reduced albedo ``albedo`` (3,)."""
+    sigma_t = jnp.exp(-ell)
+    return Medium((1 - albedo) * sigma_t, albedo * sigma_t, eta)
+
+
+class _View(eqx.Module):
+    """The fixed parts of one photo's frame (arrays traced; geometry in the closure)."""
+
+    params: object  # RenderParams in dtype, maps.albedo to be replaced
+    blur_params: object  # RenderParams in blur_dtype (variances, stretch) for the diffusion
+    irradiance: jax.Array  # (S, S, 3) at a white map [W/mm^2]
+    radii: jax.Array
+    target: jax.Array
+    inverse_sigma: jax.Array  # 0 off the fitted pixels
+    gain: jax.Array
+
+
+def _plan_for(scene, medium, map_shape, accuracy, specular):
+    """A texture-space plan of ``scene`` with ``medium`` and a colour map of ``map_shape``."""
+    maps = SurfaceMaps(albedo=np.full(tuple(map_shape) + (3,), 0.5),
+                       texturing="pre-post" if scene.material.maps is None else scene.material.maps.texturing)
+    material = dataclasses.replace(scene.material, medium=medium, maps=maps,
+                                   profile_model=scene.material.profile_model, profile=None)
+    fit_scene = dataclasses.replace(scene, material=material)
+    plan = plan_scene(fit_scene, accuracy=accuracy, method=Method.TEXTURE_SPACE)
+    if not specular:
+        plan = plan.replace(Pass.SPECULAR, False, "the photo holds subsurface light only")
+    return fit_scene, plan
+
+
+def _auto_map_size(prepared, use, texture_size) -> int:
+    """The finest power-of-two map whose texel is no smaller than a fitted pixel's footprint
+    (median UV step between neighbouring pixels): finer, texels outnumber the pixels that see them."""
+    uv = np.asarray(prepared.pixel_uv, float)
+    both = use[:, 1:] & use[:, :-1]
+    step = np.linalg.norm(uv[:, 1:] - uv[:, :-1], axis=-1)[both]
+    both_v = use[1:, :] & use[:-1, :]
+    step = np.concatenate([step, np.linalg.norm(uv[1:, :] - uv[:-1, :], axis=-1)[both_v]])
+    if step.size == 0:
+        return texture_size
+    texels = float(np.median(step)) * texture_size
+    shrink = 2 ** int(np.ceil(np.log2(max(texels, 1.0))))
+    return max(2, texture_size // shrink)
+
+
+def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma=None, noise="estimate", mask=None,
+                   saturation: float | None = None, map_size: int | None = None, init_mean_free_path=None,
+                   accuracy: float = 0.001, specular: bool = True, min_pixels: float = 0.5, max_steps: int = 12,
+                   cg_rtol: float = 1e-3, cg_max_steps: int = 500, errors: str = "probe", probe_spacing: int = 4,
+                   seed: int = 0, replans: int = 2, unconstrained: float = 0.5, dtype=jnp.float64,
+                   blur_dtype=None, progress=None) -> AlbedoMapFit:
+    r"""Fit a per-texel colour map and one mean free path per channel to photos (module docstring).
+
+    Parameters
+    ----------
+    scene : Scene, or a list of (Scene, photo) pairs
+        Geometry, camera, lights and the homogeneous medium (its reduced albedo and eta are
+        held; its mean free path starts the fit). Several pairs -- other lights or views of one
+        mesh -- are fitted jointly: one map, one medium.
+    photo : array (H, W, 3)
+        Linear radiance up to ``gain``, at the camera's resolution (omit with a list of pairs).
+    gain : float or sequence of floats (one per photo)
+        Required: photo value per unit linear radiance. ``gain_err``: its relative error.
+    sigma : array broadcastable to the photo (or one per photo), optional
+        Each pixel's standard error. Else ``noise``: a relative error (times the pixel value,
+        floored at 1 % of the 99th percentile), or ``"estimate"`` (:func:`fitting.render.estimate_noise`
+        from a first fit's residuals, then fitted again).
+    mask, saturation
+        Pixels used (:func:`fitting.render.fit_pixels`); one mask for all photos.
+    map_size : int, optional
+        Texels per side of the fitted map (default: the finest power of two whose texel is no
+        smaller than the median fitted pixel's footprint, at most the plan's texture size).
+    init_mean_free_path : (3,) [mm], optional
+        Start of the mean free path (default: the scene's medium's).
+    accuracy : float
+        The planner's accuracy for the render profile (as :func:`fitting.render.fit_render`).
+    specular : bool
+        Render the (held) surface reflection; False for a photo of subsurface light only.
+    min_pixels : float
+        A texel is fitted when the fitted pixels' bilinear lookup weights on it sum to at least this.
+    max_steps, cg_rtol, cg_max_steps
+        Gauss-Newton steps per round; CG's relative tolerance for a step (the error solves take a
+        hundredth of it) and its iterations per solve.
+    errors : {"probe", "exact", "none"}
+        How the error map is computed (module docstring); ``probe_spacing`` and ``seed`` set the probing.
+    unconstrained : float
+        Relative error of a texel above which it is reported (warning) as poorly constrained.
+    dtype, blur_dtype
+        The fit's dtype; the blur's (default ``dtype``; float32 halves the costliest pass).
+
+    Returns
+    -------
+    AlbedoMapFit
+
+    Raises
+    ------
+    AlbedoMapError (a ValueError)
+        A material that is not a homogeneous medium, no gain, photos that do not match the
+        cameras, scenes that do not share a mesh, or an option out of range.
+    """
+    say = progress if progress is not None else (lambda message: None)
+    pairs = list(scene) if photo is None and isinstance(scene, list | tuple) else [(scene, photo)]
+    if not pairs or any(p is None for _, p in pairs):
+        raise AlbedoMapError("photo: give a photo, or a list of (scene, photo) pairs as the first argument.")
+    gains, gain_err = _check_gain(gain, gain_err, len(pairs))
+    if errors not in ("probe", "exact", "none"):
+        raise AlbedoMapError(f"errors must be 'probe', 'exact' or 'none'; got {errors!r}.")
+    for name, value, low in (("probe_spacing", probe_spacing, 1), ("max_steps", max_steps, 1),
+                             ("cg_max_steps", cg_max_steps, 1)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
+            raise AlbedoMapError(f"{name} must be an integer >= {low}; got {value!r}.")
+    if not (min_pixels > 0 and np.isfinite(min_pixels)):
+        raise AlbedoMapError(f"min_pixels must be > 0 (pixels' worth of lookup weight per texel); got {min_pixels!r}.")
+    estimate = isinstance(noise, str)
+    if estimate and noise != "estimate":
+        raise AlbedoMapError(f"noise must be 'estimate' or a positive relative error; got {noise!r}.")
+    if not estimate and not (np.isfinite(float(noise)) and float(noise) > 0):
+        raise AlbedoMapError(f"noise must be 'estimate' or a positive relative error; got {noise!r}.")
+    estimate = estimate and sigma is None
+    first = pairs[0][0]
+    for s, _ in pairs:
+        _check_scene(s, first.mesh)
+    material = first.material
+    profile_model, g = material.profile_model, material.g
+    medium0 = material.medium
+    eta = jnp.broadcast_to(jnp.asarray(medium0.eta, dtype), (3,))
+    albedo_prime = jnp.asarray(np.broadcast_to(np.asarray(medium0.sigma_s_prime, float) /
+                                               (np.asarray(medium0.sigma_a, float) +
+                                                np.asarray(medium0.sigma_s_prime, float)), (3,)), dtype)
+    mfp0 = (1.0 / (np.asarray(medium0.sigma_a, float) + np.asarray(medium0.sigma_s_prime, float))
+            if init_mean_free_path is None else np.asarray(init_mean_free_path, float))
+    mfp0 = np.broadcast_to(mfp0, (3,))
+    if not np.all(np.isfinite(mfp0) & (mfp0 > 0)):
+        raise AlbedoMapError(f"init_mean_free_path must be 3 positive lengths [mm]; got {init_mean_free_path!r}.")
+    photos, uses = [], []
+    for s, p in pairs:
+        p = np.asarray(p, float)
+        use = fit_pixels(s, p, mask=mask, saturation=saturation)
+        if use.sum() < 10:
+            raise AlbedoMapError(f"photo of {s.source}: only {int(use.sum())} pixels of the object can be fitted; "
+                                 "is the camera looking at it?")
+        photos.append(p)
+        uses.append(use)
+    sigmas = _sigmas(sigma, noise, estimate, photos, uses)
+    ell = jnp.log(jnp.asarray(mfp0, dtype))
+    # The map's size, from the first view's plan at the start
+    _, plan0 = _plan_for(first, _medium(ell, albedo_prime, eta), (2, 2), accuracy, specular)
+    S = plan0.method_config.size
+    if map_size is None:
+        fit_scene, _ = _plan_for(first, _medium(ell, albedo_prime, eta), (S, S), accuracy, specular)
+        map_size = _auto_map_size(plan0.method_config.prepare(fit_scene, plan0), uses[0], S)
+    if isinstance(map_size, bool) or not isinstance(map_size, numbers.Integral) or not 2 <= map_size <= S:
+        raise AlbedoMapError(f"map_size must be an integer from 2 to the plan's texture size {S}; got {map_size!r}.")
+    shape = (int(map_size), int(map_size))
+    notes, history = [], []
+    steps = cg_total = 0
+    say("planning and the fixed passes")
+    model = _Model(pairs, photos, uses, sigmas, gains, shape, ell, albedo_prime, eta, accuracy, specular,
+                   profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps)
+    u = model.start_map(ell, min_pixels)
+    for round_ in range(replans + 1):
+        say(f"round {round_ + 1}: Gauss-Newton on {int(model.free.sum())} texels x 3 channels")
+        u, ell, n, cg, converged = model.solve(u, ell, max_steps)
+        steps, cg_total = steps + n, cg_total + cg
+        if estimate:
+            expected = model.images(u, ell)
+            sigmas = tuple(estimate_noise(p - e, e, m) for p, e, m in zip(photos, expected, uses))
+            model = model.with_sigma(sigmas)
+            say("noise estimated from the first fit's residuals: solving again with it")
+            u, ell, n, cg, converged = model.solve(u, ell, max_steps)
+            steps, cg_total, estimate = steps + n, cg_total + cg, False
+            history.append("noise estimated from the photo (adjacent residuals)")
+        moved = float(np.max(np.abs(np.asarray(ell) - model.ell)))
+        if round_ == replans or moved <= MFP_REFRESH:
+            break
+        # The frame's medium-dependent parts (profile radii, incidence law) were the round's start's:
+        # refreshed for the estimate, and re-planned (recompiled) only where the Gaussians moved
+        _, next_plan = _plan_for(first, _medium(ell, albedo_prime, eta), shape, accuracy, specular)
+        before, after = np.asarray(model.plans[0].variances), np.asarray(next_plan.variances)
+        if len(before) == len(after) and np.max(np.abs(np.log(after / before))) <= VARIANCE_REPLAN:
+            model.refresh(ell)
+            history.append(f"round {round_ + 2}: the frame refreshed for the fitted mean free path (moved "
+                           f"{100 * moved:.1f} %)")
+        else:
+            model = _Model(pairs, photos, uses, model.sigmas, gains, shape, ell, albedo_prime, eta, accuracy,
+                           specular, profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps)
+            model.set_seen(min_pixels)
+            history.append(f"round {round_ + 2}: re-planned for the fitted mean free path (the Gaussians moved)")
+    r = model.residuals(u, ell)
+    m = int(sum(int(x.sum()) for x in uses)) * 3
+    n_params = int(model.free.sum()) * 3 + 3
+    chi2 = reduced_chi2(float(r @ r), m, n_params)
+    scale = error_scale(chi2)
+    var_u, var_ell, cg = model.variances(u, ell, errors, probe_spacing, seed)
+    cg_total += cg
+    albedo = np.asarray(jnp.exp(u))
+    seen = np.asarray(model.seen)
+    # A probe estimate that came out non-positive (its scatter exceeded the variance) is no error: inf, flagged
+    rel = np.sqrt(np.where(var_u > 0, var_u * scale, np.inf) + gain_err**2)
+    albedo_err = np.where(seen[..., None], albedo * rel, np.inf)
+    mfp = np.exp(np.asarray(ell))
+    mfp_err = mfp * np.sqrt(np.clip(var_ell * scale, 0, None))
+    if errors == "probe" and np.any(seen[..., None] & ~(var_u > 0)):
+        notes.append(f"{int(np.sum(seen[..., None] & ~(var_u > 0)))} texel errors came out non-positive from the "
+                     "probing (its scatter); they are reported as infinite: use probe_spacing larger, or "
+                     "errors='exact'")
+    loose = seen[..., None] & ~(rel <= unconstrained)
+    if loose.any():
+        notes.append(f"{int(loose.any(-1).sum())} seen texels have a relative error above {100 * unconstrained:g} % "
+                     "(poorly constrained: grazing or barely in view)")
+    if chi2 > 4:
+        notes.append(f"poor fit: chi2/dof {chi2:.1f}; the errors are widened by its square root")
+    if np.any(seen[..., None] & (albedo > 1)):
+        notes.append("map values above 1: the held medium's R_d is below what the photo shows")
+    medium = _medium(ell, albedo_prime, eta)
+    medium = Medium(np.asarray(medium.sigma_a), np.asarray(medium.sigma_s_prime), np.asarray(medium0.eta))
+    images = tuple(np.asarray(i) for i in model.images(u, ell))
+    return AlbedoMapFit(albedo, albedo_err, seen, mfp, mfp_err, medium, chi2,
+                        bool(converged) and bool(np.all(np.isfinite(mfp_err))), steps, images, tuple(uses),
+                        tuple(np.asarray(s) for s in sigmas), errors, cg_total, tuple(notes), tuple(history))
+
+
+def _sigmas(sigma, noise, estimate, photos, uses):
+    out = []
+    for k, (p, use) in enumerate(zip(photos, uses)):
+        if sigma is not None:
+            s = sigma[k] if isinstance(sigma, list | tuple) else sigma
+            try:
+                s = np.broadcast_to(np.asarray(s, float), p.shape)
+            except ValueError:
+                raise AlbedoMapError(f"sigma: shape {np.shape(s)} does not broadcast to the photo's {p.shape}.") from None
+            if not (np.isfinite(s[use]).all() and (s[use] > 0).all()):
+                raise AlbedoMapError("sigma: every fitted pixel's standard error must be finite and > 0.")
+        else:
+            relative = 0.05 if estimate else float(noise)
+            floor = 0.01 * np.percentile(np.abs(p[use]), 99, axis=0)
+            s = relative * np.maximum(np.abs(p), np.maximum(floor, 1e-300))
+        out.append(s)
+    return tuple(out)
+
+
+class _Model:
+    """The fit's frames for every photo, its residuals and its linear solves (jitted once each)."""
+
+    def __init__(self, pairs, photos, uses, sigmas, gains, shape, ell, albedo_prime, eta, accuracy, specular,
+                 profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps):
+        self.dtype, self.shape, self.uses = dtype, shape, uses
+        self.cg_rtol, self.cg_max_steps = cg_rtol, cg_max_steps
+        self.albedo_prime, self.eta = albedo_prime, eta
+        self.fit_material = lambda medium: Material("fit", np.ones(3), medium=medium, profile_model=profile_model, g=g)
+        self.blur_dtype = dtype if blur_dtype is None else blur_dtype
+        self.photos, self.gains, self.sigmas = photos, gains, sigmas
+        medium = _medium(ell, albedo_prime, eta)
+        statics, plans, scenes = [], [], []
+        for s, _ in pairs:
+            fit_scene, plan = _plan_for(s, medium, shape, accuracy, specular)
+            method = plan.method_config
+            statics.append((method, method.prepare(fit_scene, plan)))
+            plans.append(plan)
+            scenes.append(fit_scene)
+        self.statics, self.plans, self.scenes = tuple(statics), tuple(plans), tuple(scenes)
+        self.refresh(ell)
+        # Texels the fitted pixels look up, in pixels' worth of bilinear weight (the pixels' own map sampler)
+        cover = 0.0
+        for (method, prepared), use in zip(self.statics, uses):
+            read = prepared.shading.colour_map
+            _, pull = jax.vjp(read, jnp.zeros(shape + (3,), dtype))
+            cover = cover + np.asarray(pull(jnp.asarray(np.repeat(use[..., None], 3, -1), dtype))[0])[..., 0]
+        self.cover = cover
+        self.seen = self.free = None
+        self._build()
+
+    def refresh(self, ell):
+        """The views' data for the medium of ``ell``, on the same plans (traced: nothing recompiles).
+
+        The profile's weights are fitted on the renderer's own radii for that medium (those of
+        :func:`jsss.render.render_params`), so that at the fitted medium the model is the
+        renderer's frame; the irradiance's oblique-incidence law and single scattering are that
+        medium's too."""
+        medium = _medium(ell, self.albedo_prime, self.eta)
+        medium = Medium(np.asarray(medium.sigma_a), np.asarray(medium.sigma_s_prime), np.asarray(medium.eta))
+        views = []
+        for fit_scene, plan, (method, prepared), p, use, sig, gain in zip(
+                self.scenes, self.plans, self.statics, self.photos, self.uses, self.sigmas, self.gains):
+            material = dataclasses.replace(fit_scene.material, medium=medium, profile=None)
+            fit_scene = dataclasses.replace(fit_scene, material=material)
+            params = render_params(fit_scene, plan, dtype=self.dtype)
+            low = render_params(fit_scene, plan, dtype=self.blur_dtype)
+            E = entry_irradiance(params, prepared.texel_lights)  # a white map: the entry factor comes per evaluation
+            radii = _radii(full_profile(material))
+            inverse = np.where(use[..., None], 1.0 / np.asarray(sig), 0.0)
+            views.append(_View(params, low, E, jnp.asarray(radii, self.dtype),
+                               jnp.asarray(np.where(use[..., None], p, 0.0), self.dtype),
+                               jnp.asarray(inverse, self.dtype), jnp.asarray(gain, self.dtype)))
+        self.views, self.ell = tuple(views), np.asarray(ell)
+
+    def with_sigma(self, sigmas):
+        self.sigmas = sigmas
+        self.views = tuple(eqx.tree_at(lambda v: v.inverse_sigma, v,
+                                        jnp.asarray(np.where(use[..., None], 1.0 / np.asarray(s), 0.0), self.dtype))
+                           for v, s, use in zip(self.views, sigmas, self.uses))
+        return self
+
+    def _radiance(self, u, ell, view, static):
+        method, prepared = static
+        medium = _medium(ell, self.albedo_prime, self.eta)
+        weights = render_profile(self.fit_material(medium), view.params.variances, radii=view.radii,
+                                 medium=medium).weights.astype(self.dtype)
+        params = eqx.tree_at(lambda p: (p.weights, p.maps.albedo), view.params, (weights, jnp.exp(u)))
+        entry, _, _ = method.surface(params, prepared, self.dtype)
+        low = view.blur_params
+        blurred = method.diffusion(low, prepared, (view.irradiance * entry).astype(low.variances.dtype))
+        M = method.texel_exitance(params, prepared, blurred.astype(self.dtype))
+        return view.gain * method.camera(params, prepared, M)
+
+    def _build(self):
+        statics = self.statics
+
+        def residuals(x, views):
+            parts = [((self._radiance(x["u"], x["ell"], v, s) - v.target) * v.inverse_sigma).reshape(-1)
+                     for v, s in zip(views, statics)]
+            return jnp.concatenate(parts)
+
+        def images(x, views):
+            return tuple(self._radiance(x["u"], x["ell"], v, s) for v, s in zip(views, statics))
+
+        self._residuals = eqx.filter_jit(residuals)
+        self._images = eqx.filter_jit(images)
+        self._raw = residuals
+        def cg(A, P, b, rtol):
+            # lineax scales its tolerance per element (atol + rtol |b_i|): the unseen texels' b_i = 0
+            # would stop it at once, so the absolute part is rtol times b's largest element
+            scale = jnp.max(jnp.stack([jnp.max(jnp.abs(leaf)) for leaf in jax.tree.leaves(b)]))
+            solver = lx.CG(rtol=rtol, atol=rtol * scale, max_steps=self.cg_max_steps)
+            sol = lx.linear_solve(A, b, solver, options={"preconditioner": P}, throw=False)
+            return sol.value, sol.stats["num_steps"], sol.result == lx.RESULTS.successful
+
+        def solve(x, views, b, newton, free, rtol):
+            """(J^T J)^-1 on the seen texels of ``b``, or, where ``newton``, of -J^T r (the Gauss-Newton
+            step); the mean free paths held where ``free`` is 0. Also (J^T J) b. One program for all,
+            compiled once per fit."""
+            A, P, r, vjp, project = self._operator(x, views, free)
+            step = jax.tree.map(jnp.negative, project(vjp(r)[0]))
+            return cg(A, P, jax.tree.map(lambda s, v: jnp.where(newton, s, v), step, b), rtol) + (A.mv(b),)
+
+        compiled = eqx.filter_jit(solve)
+        # newton, free and the tolerance as arrays: as Python scalars they would be static, one
+        # program each. A Gauss-Newton step needs only cg_rtol (an inexact step: the next one
+        # corrects it); the error solves a hundredth of it.
+        self._solve = lambda x, views, b, newton, free: compiled(
+            x, views, b, jnp.asarray(newton), jnp.asarray(free, self.dtype),
+            jnp.asarray(self.cg_rtol if newton else 0.01 * self.cg_rtol, self.dtype))
+
+    # -- the start and the solves --------------------------------------------------------------
+    def start_map(self, ell, min_pixels):
+        """ln c per texel: photo over the white map's render, pooled over the pixels that see each texel."""
+        ones = jnp.zeros(self.shape + (3,), self.dtype)
+        white = self._images({"u": ones, "ell": ell}, self.views)
+        num = den = 0.0
+        for (method, prepared), v, w, use in zip(self.statics, self.views, white, self.uses):
+            _, pull = jax.vjp(prepared.shading.colour_map, ones)
+            num = num + np.asarray(pull(v.target * use[..., None])[0])
+            den = den + np.asarray(pull(jnp.asarray(w) * use[..., None])[0])
+        self.set_seen(min_pixels)
+        seen = self.seen
+        if not seen.any():
+            raise AlbedoMapError(f"no map texel is seen by at least min_pixels = {min_pixels:g} pixels' weight; "
+                                 "lower min_pixels or map_size.")
+        ratio = np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
+        fill = np.nanmedian(np.where(seen[..., None], ratio, np.nan).reshape(-1, 3), axis=0)
+        ratio = np.where(self.free[..., None] & np.isfinite(ratio) & (ratio > 0), ratio, fill)
+        return jnp.asarray(np.log(np.clip(ratio, 1e-4, 1e4)), self.dtype)
+
+    def residuals(self, u, ell):
+        return np.asarray(self._residuals({"u": u, "ell": ell}, self.views))
+
+    def images(self, u, ell):
+        return [np.asarray(i) for i in self._images({"u": u, "ell": ell}, self.views)]
+
+    def set_seen(self, min_pixels):
+        """``seen``: texels looked up with weight >= ``min_pixels`` (reported); ``free``: every texel
+        any fitted pixel looks up (fitted: one held at a guess would bias its seen neighbours
+        through the diffusion -- 4 to 6 standard errors next to the view's edge, measured)."""
+        self.seen = self.cover >= min_pixels
+        self.free = self.cover > 1e-6 * max(float(self.cover.max()), 1e-300)
+
+    def _operator(self, x, views, free):
+        """J^T J restricted to the seen texels (identity on the others; on the mean free paths too
+        where ``free`` is 0), a Jacobi preconditioner, the residuals, J^T and the restriction."""
+        seen = jnp.asarray(self.free[..., None], self.dtype)
+        r, jvp = jax.linearize(lambda y: self._raw(y, views), x)
+        vjp = jax.linear_transpose(jvp, x)
+
+        def project(v):
+            return {"u": v["u"] * seen, "ell": v["ell"] * free}
+
+        def normal(v):
+            w = vjp(jvp(project(v)))[0]
+            return {"u": w["u"] * seen + v["u"] * (1 - seen), "ell": w["ell"] * free + v["ell"] * (1 - free)}
+
+        structure = jax.eval_shape(lambda: x)
+        A = lx.FunctionLinearOperator(normal, structure, tags=lx.positive_semidefinite_tag)
+        # Jacobi: the mean free paths' exact diagonal (the channels do not couple: one JVP gives all
+        # three columns), the texels' from the pixels each covers weighted by (L / s)^2
+        column = jvp({"u": jnp.zeros_like(x["u"]), "ell": jnp.ones_like(x["ell"])})
+        d_ell = jnp.stack([jnp.sum(jnp.concatenate([c.reshape(-1, 3) for c in self._split(column)])[:, k] ** 2)
+                           for k in range(3)])
+        d_u = 0.0
+        for (method, prepared), v in zip(self.statics, views):
+            level = (v.target * v.inverse_sigma) ** 2
+            _, pull = jax.vjp(prepared.shading.colour_map, x["u"])
+            d_u = d_u + pull(level)[0]
+        # A barely seen texel's own pixels understate its diagonal (its light reaches others through
+        # the diffusion): floored at a twentieth of the mean fitted texel's, not near zero, which
+        # made CG take hundreds of iterations
+        typical = jnp.sum(jnp.where(seen > 0, d_u, 0.0)) / jnp.maximum(jnp.sum(seen) * 3, 1.0)
+        d_u = jnp.where(seen > 0, jnp.maximum(d_u, 0.05 * typical), 1.0)
+        P = lx.FunctionLinearOperator(lambda v: {"u": v["u"] / d_u, "ell": v["ell"] / jnp.maximum(d_ell, 1e-300)},
+                                      structure, tags=lx.positive_semidefinite_tag)
+        return A, P, r, vjp, project
+
+    def _split(self, flat):
+        out, at = [], 0
+        for v in self.views:
+            n = v.target.size
+            out.append(flat[at:at + n])
+            at += n
+        return out
+
+    def solve(self, u, ell, max_steps):
+        x = {"u": u, "ell": ell}
+        cost = float(np.sum(self.residuals(u, ell) ** 2))
+        cg_total, converged, n = 0, False, 0
+        for n in range(1, max_steps + 1):
+            delta, cg, _, _ = self._solve(x, self.views, jax.tree.map(jnp.zeros_like, x), True, 1.0)
+            cg_total += int(cg)
+            t = 1.0
+            for _ in range(8):  # halving line search
+                trial = jax.tree.map(lambda a, d: a + t * d, x, delta)
+                new = float(np.sum(self.residuals(trial["u"], trial["ell"]) ** 2))
+                if np.isfinite(new) and new <= cost:
+                    break
+                t *= 0.5
+            else:
+                converged = True  # no decrease along the Gauss-Newton direction: at the minimum to rounding
+                break
+            x, gained, cost = trial, cost - new, new
+            moved = max(float(jnp.max(jnp.abs(t * delta["u"]))), float(jnp.max(jnp.abs(t * delta["ell"]))))
+            if moved < 1e-6 or gained < 1e-2:
+                converged = True
+                break
+        return x["u"], x["ell"], n, cg_total, converged
+
+    def variances(self, u, ell, errors, spacing, seed):
+        """Diagonals of (J^T J)^-1 for the texels (H_m, W_m, 3; inf where unseen) and the mean free paths (3,)."""
+        seen = self.free
+        inf_u = np.where(seen[..., None], np.nan, np.inf) * np.ones(self.shape + (3,))
+        if errors == "none":
+            return np.where(seen[..., None], 0.0, np.inf) * np.ones(self.shape + (3,)), np.zeros(3), 0
+        x = {"u": u, "ell": ell}
+        if errors == "exact":
+            flat, unravel = ravel_pytree(x)
+            J = np.asarray(jax.jacfwd(lambda f: self._raw(unravel(f), self.views))(flat))
+            keep = np.asarray(ravel_pytree({"u": jnp.asarray(np.repeat(seen[..., None], 3, -1), self.dtype),
+                                            "ell": jnp.ones(3, self.dtype)})[0]) > 0
+            cov = np.full(flat.size, np.inf)
+            H = J[:, keep].T @ J[:, keep]
+            cov[keep] = np.diag(np.linalg.inv(H))
+            out = unravel(jnp.asarray(np.where(np.isfinite(cov), cov, 0.0)))
+            var_u = np.where(seen[..., None], np.asarray(out["u"]), np.inf)
+            return var_u, np.asarray(out["ell"]), 0
+        # The mean free paths couple every texel of their channel: taken out exactly (Schur complement),
+        # so that the probes see only the texels' own, local block B:
+        # diag(A^-1)_u = diag(B^-1) + Y^2 / S,  Y = B^-1 C,  S = D - C^T Y,  var(ell) = 1 / S
+        zeros_u, ones_ell = jnp.zeros(self.shape + (3,), self.dtype), jnp.ones(3, self.dtype)
+        _, _, _, coupled = self._solve(x, self.views, {"u": zeros_u, "ell": ones_ell}, False, 1.0)
+        C, D = np.asarray(coupled["u"]) * seen[..., None], np.asarray(coupled["ell"])
+        Y, cg, _, _ = self._solve(x, self.views, {"u": jnp.asarray(C, self.dtype), "ell": 0 * ones_ell}, False, 0.0)
+        Y = np.asarray(Y["u"]) * seen[..., None]
+        S = D - (C * Y).reshape(-1, 3).sum(0)
+        var_ell = 1.0 / S
+        cg_total = int(cg)
+        rng = np.random.default_rng(seed)
+        rows, cols = np.indices(self.shape)
+        var_u = inf_u.copy()
+        for i in range(spacing):
+            for j in range(spacing):
+                # signs on the reported texels only: a barely seen one's large inverse entries would
+                # scatter its seen neighbours' estimates (the estimate stays unbiased on any subset)
+                colour = ((rows % spacing == i) & (cols % spacing == j) & self.seen)[..., None]
+                if not colour.any():
+                    continue
+                signs = np.where(colour, rng.choice([-1.0, 1.0], size=self.shape + (3,)), 0.0)
+                value, cg, _, _ = self._solve(x, self.views, {"u": jnp.asarray(signs, self.dtype), "ell": 0 * ones_ell},
+                                              False, 0.0)
+                cg_total += int(cg)
+                var_u = np.where(np.broadcast_to(colour, var_u.shape), signs * np.asarray(value["u"]), var_u)
+        return var_u + Y**2 / S, var_ell, cg_total
