@@ -68,7 +68,7 @@ from fitting.statistics import error_scale, reduced_chi2
 from jsss.medium import Medium
 from jsss.render import Material, Method, Pass, Scene, plan_scene, render_params
 from jsss.render.methods.base import entry_irradiance
-from jsss.render.profiles import _radii, full_profile, render_profile
+from jsss.render.profiles import full_profile, profile_radii, render_profile
 from jsss.render.surface_maps import SurfaceMaps
 
 __all__ = ["AlbedoMapError", "AlbedoMapFit", "fit_albedo_map"]
@@ -466,7 +466,7 @@ class _Model:
             params = render_params(fit_scene, plan, dtype=self.dtype)
             low = render_params(fit_scene, plan, dtype=self.blur_dtype)
             E = entry_irradiance(params, prepared.texel_lights)  # a white map: the entry factor comes per evaluation
-            radii = _radii(full_profile(material))
+            radii = profile_radii(full_profile(material))
             inverse = np.where(use[..., None], 1.0 / np.asarray(sig), 0.0)
             views.append(_View(params, low, E, jnp.asarray(radii, self.dtype),
                                jnp.asarray(np.where(use[..., None], p, 0.0), self.dtype),

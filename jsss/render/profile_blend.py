@@ -67,7 +67,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..medium import Medium
-from .profiles import _numpy_fit, _radii, _reference, full_profile, shared_variances
+from .profiles import _numpy_fit, _reference, full_profile, profile_radii, shared_variances
 from .scene import Material
 from .surface_maps import blend_coefficients, coordinates
 
@@ -178,12 +178,12 @@ def _corner_profiles(material: Material, corners: Medium):
 
 def _basis_radii(fulls, variances) -> np.ndarray:
     """Radii [mm] for the nodes' fits and errors: the corners' own (the homogeneous plan's
-    ``_radii``), so that a node's fit error reads as the same material's homogeneous profile
+    ``profile_radii``), so that a node's fit error reads as the same material's homogeneous profile
     error, reaching down to a third of the narrowest variance's sigma (a narrower range leaves
     that Gaussian's weight free where no radius sees it, and the blend of two such fits is then
     off by more than either fit). A transport profile's near-source peak makes the relative
     RMS grow as the radii reach deeper, so the range must not follow the variances below that."""
-    own = [_radii(f) for f in fulls]
+    own = [profile_radii(f) for f in fulls]
     lo = min(min(r[0] for r in own), np.sqrt(np.min(variances)) / 3)
     hi = max(max(r[-1] for r in own), np.sqrt(np.max(variances)) * 8)
     return np.geomspace(lo, hi, 800)

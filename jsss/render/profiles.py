@@ -31,8 +31,8 @@ from ..stored_programs import reusable_program
 from .kept import save_arrays
 from .scene import Material
 
-__all__ = ["choose_variances", "exact_profile", "full_profile", "keep_profiles_in", "reduction_error", "render_profile",
-           "shared_variances"]
+__all__ = ["choose_variances", "exact_profile", "full_profile", "keep_profiles_in", "profile_radii", "reduction_error",
+           "render_profile", "shared_variances"]
 
 
 def full_profile(material: Material, medium=None) -> GaussianSum:
@@ -179,7 +179,7 @@ def shared_variances(full: GaussianSum, n: int, *, significant: float = 1e-3) ->
     return np.geomspace(lo, hi, n)
 
 
-def _radii(full: GaussianSum) -> np.ndarray:
+def profile_radii(full: GaussianSum) -> np.ndarray:
     """Log-spaced radii [mm] that resolve the narrowest term's core and the widest term's tail."""
     v = np.asarray(full.variances)
     v = v[v > 0]
@@ -235,7 +235,7 @@ def render_profile(material: Material, variances, *, radii=None, medium=None) ->
     -------
     GaussianSum with weights (n, 3).
     """
-    r = jnp.asarray(_radii(full_profile(material)) if radii is None else radii)
+    r = jnp.asarray(profile_radii(full_profile(material)) if radii is None else radii)
     profile, total = _reference(material, r, medium)
     weights, v, _ = _fit_weights_jitted(variances, r, profile, total)
     return GaussianSum(weights, v)
@@ -274,7 +274,7 @@ def reduction_error(material: Material, variances, *, radii=None, reference=None
     passed to reuse them. The error is measured from half the ``resolution`` [mm] out
     (:func:`_numpy_fit`). Computed in NumPy float64.
     """
-    r = np.asarray(_radii(full_profile(material)) if radii is None else radii, float)
+    r = np.asarray(profile_radii(full_profile(material)) if radii is None else radii, float)
     reference = _reference(material, jnp.asarray(r)) if reference is None else reference
     return _numpy_fit(variances, r, reference, resolution)[1]
 
@@ -295,7 +295,7 @@ def choose_variances(material: Material, target: float, *, max_terms: int = 12, 
     error : float (worst channel); reached : bool
     """
     full = full_profile(material)
-    r = _radii(full)
+    r = profile_radii(full)
     reference = tuple(np.asarray(a, float) for a in _reference(material, jnp.asarray(r)))
     if material.gaussians is not None:  # the profile is given: use its own variances
         grid = np.asarray(full.variances)
