@@ -91,7 +91,9 @@ class CalibrationRow:
     ``prep_ms`` the method's own one-time work (the normal filter, the texel bake; the camera
     raster and shadow maps every method shares are left out), ``work`` the pixels (or
     texels for texture space) it processed, ``closed`` whether the object's surface has no
-    open boundary."""
+    open boundary, ``fixed_ms`` the part of ``ms`` that does not grow with the work (the
+    pixel methods' frame at a tiny resolution: per-frame solves such as the oblique-incidence
+    law's H function; 0 where not measured)."""
 
     scene: str
     blur_pixels: float
@@ -105,6 +107,7 @@ class CalibrationRow:
     blur_frame: float = float("nan")  # nan: a table from before 2026-12-02, matched by blur_pixels
     backlit: float = 0.0
     curvature: float = 0.0
+    fixed_ms: float = 0.0
 
     def __post_init__(self):
         if self.method not in METHODS:
@@ -231,9 +234,11 @@ def estimate_methods(rows, features: FrameFeatures, work: dict) -> list[MethodEs
                      f"{', '.join(sorted({r.scene for r in basis_rows}))}")
         worst = max(basis_rows, key=lambda r: r.error)
         # One frame with its own preparation: what rendering this scene once costs. Frames
-        # scale with the work; so does texture space's texel bake, while the normal filter's
+        # scale with the work, beyond their fixed part (a homogeneous medium's oblique law, 1 ms
+        # of a 96 x 72 Lambert frame, scaled with the pixels had made Lambert at 320 x 240 look
+        # 4x slower than it is); so does texture space's texel bake, while the normal filter's
         # preparation is mostly the mesh's eigenvectors, which do not follow the pixels.
-        ms = float(np.median([r.ms * work[method] / r.work
+        ms = float(np.median([r.fixed_ms + (r.ms - r.fixed_ms) * work[method] / r.work
                               + r.prep_ms * (work[method] / r.work if method == Method.TEXTURE_SPACE else 1.0)
                               for r in basis_rows]))
         estimates.append(MethodEstimate(method, knob, worst.error, ms, basis))

@@ -63,6 +63,18 @@ def scene_at_distance(scene: Scene, factor: float, *, width: int, height: int, t
     return dataclasses.replace(scene, camera=camera, texture_size=min(texture_size, scene.texture_size))
 
 
+FIXED_RESOLUTION = (8, 6)  # pixels at which a pixel method's frame is its fixed part alone
+
+
+def _fixed_ms(scene: Scene, plan, repeats: int) -> float:
+    """Milliseconds of ``plan``'s frame of ``scene`` at :data:`FIXED_RESOLUTION`: the part of a
+    pixel method's frame that does not grow with the pixels (the time model's fixed part)."""
+    width, height = FIXED_RESOLUTION
+    tiny = dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, width=width, height=height))
+    result = render(tiny, plan, dtype=jnp.float32, time_passes=True, repeats=repeats)
+    return 1000 * sum(t for k, t in result.timings.items() if k not in _PREP)
+
+
 def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None = None,
                     reference_samples: int = 400_000, variants=VARIANTS, repeats: int = 3, progress=None):
     """Frames of ``scene`` by every (method, knobs) in ``variants``, with their errors and times.
@@ -78,6 +90,7 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
         plan = plan.replace(Pass.SINGLE_SCATTERING, False, "diffusion only: the reference integrates the profile")
         result = render(scene, plan, dtype=jnp.float32, time_passes=True, repeats=repeats)
         frame_ms = 1000 * sum(t for k, t in result.timings.items() if k not in _PREP)
+        fixed_ms = _fixed_ms(scene, plan, repeats) if method != Method.TEXTURE_SPACE else 0.0
         prep_ms = 1000 * sum(t for k, t in result.timings.items() if k in _PREP)
         own_ms = 1000 * sum(t for k, t in result.timings.items() if k in _OWN_PREP)
         work = plan.method_config.work(scene)
@@ -87,7 +100,7 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
                              relative_rms(result.radiance, reference.radiance, reference.mask), round(frame_ms, 3),
                              int(work), round(own_ms, 3), is_closed(scene.mesh),
                              blur_frame=round(features.blur_frame, 6), backlit=round(features.backlit, 4),
-                             curvature=round(features.curvature, 5))
+                             curvature=round(features.curvature, 5), fixed_ms=round(min(fixed_ms, frame_ms), 3))
         gaussians = len(plan.variances) if isinstance(plan.method_config, TextureSpace) else 0
         frames.append(MethodFrame(row, result.radiance, prep_ms, gaussians))
         if progress is not None:

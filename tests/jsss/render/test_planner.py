@@ -186,10 +186,10 @@ def test_shipped_table_picks_a_cheaper_method_for_a_looser_target_and_says_why()
 def test_shipped_table_follows_the_measured_errors_of_a_front_lit_sphere():
     """The marble sphere from its own camera: at the calibration's 96 x 72 Lambert measured
     2.4 % and is the cheapest, so it does for 5 %. At 320 x 240 (and for 2 % at both) the
-    choice is the cheapest method predicted to meet the target, which depends on the time
-    model: since 2026-12-04 a homogeneous medium's Lambert frame holds the oblique-incidence
-    law's H solve (about 1 ms, the same at any resolution), which the planner scales with the
-    pixels, so at 320 x 240 texture space on its 64^2 texels is predicted cheaper. From 20x as
+    choice is the cheapest method predicted to meet the target: since 2026-12-04 a homogeneous
+    medium's Lambert frame holds the oblique-incidence law (its H solve per frame, its lookup
+    per pixel), and at 320 x 240 it measured 8-12 ms against texture space's 7 ms on its 64^2
+    texels, so either may be predicted cheaper. From 20x as
     far the profile spans a fraction of a pixel, and the prediction rests on the far frames
     (checks the shipped table: rerunning the calibration may move these numbers, and this test
     says so)."""
