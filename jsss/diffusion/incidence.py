@@ -124,7 +124,10 @@ def incidence_law(medium: Medium):
     # 1e-6 of it: A is smooth in mu). The grid ends at 1, so its last row is normal incidence.
     grid = jnp.linspace(0.0, 1.0, 257, dtype=albedo.dtype)
     table = plane_albedo(albedo, grid).reshape(257, -1)                      # (257, channels)
-    table = table / table[-1]
+    # A channel that does not scatter returns nothing at any angle: its ratio is 1, not 0/0
+    # (double where, so that the gradient stays finite too).
+    normal = table[-1]
+    table = jnp.where(normal > 0, table / jnp.where(normal > 0, normal, 1.0), 1.0)
 
     def ratio(cos_incident):
         cos = jnp.clip(as_float_array(cos_incident), 0.0, 1.0)
@@ -188,7 +191,8 @@ def _incidence_ratio_numpy(medium: Medium, cos_incident) -> np.ndarray:
     inverse = root[None, ..., 0] + half[None, ..., 0] * np.einsum("sj,...j->s...", terms, H)
     h = 1.0 / inverse
     table = (1.0 - h * np.sqrt(np.maximum(1 - albedo, 0.0))).reshape(257, -1)
-    table = table / table[-1]
+    normal = table[-1]
+    table = np.where(normal > 0, table / np.where(normal > 0, normal, 1.0), 1.0)  # as the JAX path
     # The law's ratio(cos): Snell, then interpolation per channel.
     cos = np.clip(cos, 0.0, 1.0)
     cos_b = cos.reshape(cos.shape + (1,) * n)

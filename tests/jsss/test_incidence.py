@@ -85,3 +85,22 @@ def test_index_matched_brdf_is_the_exit_angle_histogram_of_a_walk():
                          for a, b in zip(edges[:-1], edges[1:])])
     assert np.all(np.abs(counts - expected) < 4 * noise + 2e-4), (counts, expected, noise)
     assert counts.sum() == pytest.approx(float(plane_albedo(jnp.asarray(0.75), 0.6)), abs=4 * noise.sum())
+
+
+def test_a_channel_that_does_not_scatter_has_the_ratio_one_not_nan():
+    """sigma_s' = 0 in one channel: no light returns at any angle, so the law is 1 there (it had
+    been 0/0); the other channels, the NumPy path and the gradient are unchanged and finite."""
+    import warnings
+
+    medium = Medium(jnp.array([0.1, 0.2, 0.3]), jnp.array([0.0, 1.0, 2.0]), 1.3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the NumPy path had warned "invalid value encountered in divide"
+        numbers = np.asarray(incidence_ratio(medium, np.array([0.2, 0.7])))
+    traced = np.asarray(jax.jit(lambda m: incidence_ratio(m, jnp.array([0.2, 0.7])))(medium))
+    np.testing.assert_array_equal(numbers[:, 0], 1.0)
+    np.testing.assert_allclose(traced, numbers, rtol=1e-12)
+    alone = np.asarray(incidence_ratio(Medium(jnp.array([0.2, 0.3]), jnp.array([1.0, 2.0]), 1.3), np.array([0.2, 0.7])))
+    np.testing.assert_allclose(numbers[:, 1:], alone, rtol=1e-14)
+    grad = jax.grad(lambda s: jax.jit(lambda m: incidence_ratio(m, 0.5))(
+        Medium(medium.sigma_a, s, medium.eta)).sum())(medium.sigma_s_prime)
+    assert np.isfinite(np.asarray(grad)).all()
