@@ -18,6 +18,7 @@ __all__ = [
     "append_axes",
     "as_float_array",
     "format_value",
+    "interpolate_rows",
     "is_concrete",
     "safe_sqrt",
     "warn_if_low_precision",
@@ -109,3 +110,15 @@ def append_axes(x, ndim: int):
     """``x`` reshaped to ``x.shape + (1,) * ndim`` so it broadcasts against channel axes."""
     x = jnp.asarray(x)
     return x.reshape(x.shape + (1,) * ndim)
+
+
+def interpolate_rows(position, table):
+    """Linear interpolation between the rows of ``table`` (shape ``(n,) + T``) at fractional row
+    ``position`` (shape ``S``): shape ``S + T``. The grid is uniform, so the row is found by
+    arithmetic, not by a search (``jnp.interp``'s search was most of a lookup on CPU); beyond the
+    table the end rows extrapolate linearly (clip ``position`` to ``[0, n - 1]`` to hold them)."""
+    n = table.shape[0]
+    below = jnp.clip(jnp.floor(position), 0, n - 2)
+    t = append_axes(position - below, table.ndim - 1)
+    below = below.astype(jnp.int32)
+    return (1 - t) * table[below] + t * table[below + 1]

@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy import trapezoid
 
+from ..numerics import interpolate_rows
 from .environment import EnvironmentGeometry, environment_irradiance
 from .image_space import camera_buffers
 from .lighting import irradiance, light_geometry, shadow_map
@@ -172,9 +173,7 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
         # Linear in log R over log r, as jnp.interp would, but the radii are evenly spaced in
         # log r, so the interval is found by arithmetic instead of a search: 1.8x faster.
         x = jnp.clip((jnp.log(jnp.maximum(d, r[1])) - log_first) / log_step, 0.0, n - 1.0)
-        i = jnp.minimum(jnp.floor(x).astype(jnp.int32), n - 2)
-        t = (x - i)[..., None]
-        return jnp.exp(log_table[i] * (1 - t) + log_table[i + 1] * t)
+        return jnp.exp(interpolate_rows(x, log_table))
 
     ys, Es = jnp.asarray(position), jnp.asarray(E_samples)
     half = (samples + 1) // 2  # even-index points

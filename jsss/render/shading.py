@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..fresnel import exit_lobe, fresnel_reflectance
+from ..numerics import interpolate_rows
 from ..diffusion.incidence import deposit_depth
 from ..diffusion.single_scattering import single_scattering_albedo, single_scattering_brdf_from_cosines
 from .environment import EnvironmentGeometry, environment_specular
@@ -94,11 +95,7 @@ def single_scattering(medium, normals, view_dirs, light_geometry, radiant, *, de
 
 
 def _albedo_at(albedo_table, cos_i):
-    position = cos_i * (ALBEDO_NODES - 1)
-    below = jnp.clip(jnp.floor(position), 0, ALBEDO_NODES - 2)
-    fraction = (position - below)[..., None]
-    below = below.astype(jnp.int32)
-    return (1 - fraction) * albedo_table[below] + fraction * albedo_table[below + 1]
+    return interpolate_rows(cos_i * (ALBEDO_NODES - 1), albedo_table)
 
 
 def _environment_single_scattering(medium, g, n, v, cos_o, radiant, albedo_table):
