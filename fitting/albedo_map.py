@@ -62,8 +62,9 @@ from jax.flatten_util import ravel_pytree
 import jax.numpy as jnp
 import lineax as lx
 import numpy as np
+import optimistix as optx
 
-from fitting.render import RenderFitError, estimate_noise, fit_pixels
+from fitting.render import HUBER_K, RenderFitError, _huber, estimate_noise, fit_pixels
 from fitting.statistics import error_scale, reduced_chi2
 from jsss.medium import Medium
 from jsss.render import Material, Method, Pass, Scene, plan_scene, render_params
@@ -78,6 +79,11 @@ __all__ = ["AlbedoMapError", "AlbedoMapFit", "fit_albedo_map"]
 # for the estimate on the fixed variances, whose geometric spacing (about 2.6x) leaves room
 VARIANCE_REPLAN = 0.25
 MFP_REFRESH = 0.003  # refresh the frame for the estimate when ln mfp moved by more in a round
+# The error solves' relative residual (scaled 2-norm): a probe's estimate errs by about this
+# fraction of the inverse's diagonal, far below the probing's own scatter
+ERROR_RTOL = 1e-3
+# The mean free paths' (co)variance solve: one solve per fit, whose error enters every texel's
+SCHUR_RTOL = 1e-7
 
 
 class AlbedoMapError(RenderFitError):
@@ -116,6 +122,8 @@ class AlbedoMapFit:
     cg_steps : int
         Conjugate-gradient iterations, all solves together.
     warnings, history : tuple of str
+    profile_model : str
+        The profile model of the fit ("dipole" or "transport": the scene material's).
     """
 
     albedo: np.ndarray
@@ -134,6 +142,7 @@ class AlbedoMapFit:
     cg_steps: int
     warnings: tuple = ()
     history: tuple = ()
+    profile_model: str = "dipole"
 
     @property
     def image(self) -> np.ndarray:
@@ -226,7 +235,7 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
                    saturation: float | None = None, map_size: int | None = None, init_mean_free_path=None,
                    accuracy: float = 0.001, specular: bool = True, min_pixels: float = 0.5, max_steps: int = 12,
                    cg_rtol: float = 1e-3, cg_max_steps: int = 500, errors: str = "probe", probe_spacing: int = 4,
-                   seed: int = 0, replans: int = 2, unconstrained: float = 0.5, dtype=jnp.float64,
+                   seed: int = 0, replans: int = 2, unconstrained: float = 0.5, loss: str = "huber", dtype=jnp.float64,
                    blur_dtype=None, progress=None) -> AlbedoMapFit:
     r"""Fit a per-texel colour map and one mean free path per channel to photos (module docstring).
 
@@ -264,6 +273,11 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
         How the error map is computed (module docstring); ``probe_spacing`` and ``seed`` set the probing.
     unconstrained : float
         Relative error of a texel above which it is reported (warning) as poorly constrained.
+    loss : {"huber", "squared"}
+        ``"huber"`` (default): Huber's loss on the whitened residuals (quadratic within
+        :data:`fitting.render.HUBER_K` = 1.345 standard errors, linear beyond), so that fireflies and
+        hot pixels do not steer their texels; chi^2/dof then comes from the median square. As
+        :func:`fitting.render.fit_render`.
     dtype, blur_dtype
         The fit's dtype; the blur's (default ``dtype``; float32 halves the costliest pass).
 
@@ -282,6 +296,9 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
     if not pairs or any(p is None for _, p in pairs):
         raise AlbedoMapError("photo: give a photo, or a list of (scene, photo) pairs as the first argument.")
     gains, gain_err = _check_gain(gain, gain_err, len(pairs))
+    if loss not in ("huber", "squared"):
+        raise AlbedoMapError(f"loss must be 'huber' or 'squared'; got {loss!r}.")
+    robust = loss == "huber"
     if errors not in ("probe", "exact", "none"):
         raise AlbedoMapError(f"errors must be 'probe', 'exact' or 'none'; got {errors!r}.")
     for name, value, low in (("probe_spacing", probe_spacing, 1), ("max_steps", max_steps, 1),
@@ -335,7 +352,7 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
     steps = cg_total = 0
     say("planning and the fixed passes")
     model = _Model(pairs, photos, uses, sigmas, gains, shape, ell, albedo_prime, eta, accuracy, specular,
-                   profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps)
+                   profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps, robust)
     u = model.start_map(ell, min_pixels)
     for round_ in range(replans + 1):
         say(f"round {round_ + 1}: Gauss-Newton on {int(model.free.sum())} texels x 3 channels")
@@ -362,13 +379,22 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
                            f"{100 * moved:.1f} %)")
         else:
             model = _Model(pairs, photos, uses, model.sigmas, gains, shape, ell, albedo_prime, eta, accuracy,
-                           specular, profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps)
+                           specular, profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps, robust)
             model.set_seen(min_pixels)
             history.append(f"round {round_ + 2}: re-planned for the fitted mean free path (the Gaussians moved)")
     r = model.residuals(u, ell)
     m = int(sum(int(x.sum()) for x in uses)) * 3
     n_params = int(model.free.sum()) * 3 + 3
     chi2 = reduced_chi2(float(r @ r), m, n_params)
+    if robust:  # chi^2 from the median square (0.4549 for a unit Gaussian), as fit_render
+        plain = np.concatenate([((i - p) / s)[use].reshape(-1) for i, p, s, use in
+                                zip(model.images(u, ell), photos, model.sigmas, uses)])
+        chi2 = float(np.median(plain**2) / 0.45494) * m / max(m - n_params, 1)
+        outliers = float(np.mean(np.abs(plain) > 5))
+        if outliers > 0.001:
+            notes.append(f"{100 * outliers:.2g} % of the fitted pixels lie beyond 5 standard errors (fireflies, hot "
+                         f"pixels, or a part of the scene the model lacks); Huber's loss (k = {HUBER_K}) kept them "
+                         "from steering their texels")
     scale = error_scale(chi2)
     var_u, var_ell, cg = model.variances(u, ell, errors, probe_spacing, seed)
     cg_total += cg
@@ -396,7 +422,8 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
     images = tuple(np.asarray(i) for i in model.images(u, ell))
     return AlbedoMapFit(albedo, albedo_err, seen, mfp, mfp_err, medium, chi2,
                         bool(converged) and bool(np.all(np.isfinite(mfp_err))), steps, images, tuple(uses),
-                        tuple(np.asarray(s) for s in sigmas), errors, cg_total, tuple(notes), tuple(history))
+                        tuple(np.asarray(s) for s in sigmas), errors, cg_total, tuple(notes), tuple(history),
+                        profile_model)
 
 
 def _sigmas(sigma, noise, estimate, photos, uses):
@@ -422,8 +449,8 @@ class _Model:
     """The fit's frames for every photo, its residuals and its linear solves (jitted once each)."""
 
     def __init__(self, pairs, photos, uses, sigmas, gains, shape, ell, albedo_prime, eta, accuracy, specular,
-                 profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps):
-        self.dtype, self.shape, self.uses = dtype, shape, uses
+                 profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps, robust):
+        self.dtype, self.shape, self.uses, self.robust = dtype, shape, uses, robust
         self.cg_rtol, self.cg_max_steps = cg_rtol, cg_max_steps
         self.albedo_prime, self.eta = albedo_prime, eta
         self.fit_material = lambda medium: Material("fit", np.ones(3), medium=medium, profile_model=profile_model, g=g)
@@ -498,7 +525,8 @@ class _Model:
         def residuals(x, views):
             parts = [((self._radiance(x["u"], x["ell"], v, s) - v.target) * v.inverse_sigma).reshape(-1)
                      for v, s in zip(views, statics)]
-            return jnp.concatenate(parts)
+            r = jnp.concatenate(parts)
+            return _huber(r) if self.robust else r
 
         def images(x, views):
             return tuple(self._radiance(x["u"], x["ell"], v, s) for v, s in zip(views, statics))
@@ -506,29 +534,38 @@ class _Model:
         self._residuals = eqx.filter_jit(residuals)
         self._images = eqx.filter_jit(images)
         self._raw = residuals
-        def cg(A, P, b, rtol):
-            # lineax scales its tolerance per element (atol + rtol |b_i|): the unseen texels' b_i = 0
-            # would stop it at once, so the absolute part is rtol times b's largest element
-            scale = jnp.max(jnp.stack([jnp.max(jnp.abs(leaf)) for leaf in jax.tree.leaves(b)]))
-            solver = lx.CG(rtol=rtol, atol=rtol * scale, max_steps=self.cg_max_steps)
-            sol = lx.linear_solve(A, b, solver, options={"preconditioner": P}, throw=False)
-            return sol.value, sol.stats["num_steps"], sol.result == lx.RESULTS.successful
+        def cg(A, d, b, rtol):
+            # Symmetric Jacobi scaling, D^-1/2 A D^-1/2 y = D^-1/2 b, x = D^-1/2 y: the scaled
+            # matrix has a unit diagonal, so y and its residual share units and one 2-norm stop
+            # (||r|| <= rtol ||b||) means the same for every texel. lineax's default stop is per
+            # element (atol + rtol |b_i|, max norm): the barely seen texels' near-null directions
+            # kept it iterating hundreds of times on residuals that move no seen texel.
+            root = jax.tree.map(jnp.sqrt, d)
+            scaled = lx.FunctionLinearOperator(
+                lambda y: jax.tree.map(jnp.divide, A.mv(jax.tree.map(jnp.divide, y, root)), root),
+                A.in_structure(), tags=lx.positive_semidefinite_tag)
+            rhs = jax.tree.map(jnp.divide, b, root)
+            size = jnp.sqrt(sum(jnp.sum(leaf**2) for leaf in jax.tree.leaves(rhs)))
+            solver = lx.CG(rtol=0.0, atol=rtol * size, norm=optx.two_norm, max_steps=self.cg_max_steps)
+            sol = lx.linear_solve(scaled, rhs, solver, throw=False)
+            return (jax.tree.map(jnp.divide, sol.value, root), sol.stats["num_steps"],
+                    sol.result == lx.RESULTS.successful)
 
         def solve(x, views, b, newton, free, rtol):
             """(J^T J)^-1 on the seen texels of ``b``, or, where ``newton``, of -J^T r (the Gauss-Newton
             step); the mean free paths held where ``free`` is 0. Also (J^T J) b. One program for all,
             compiled once per fit."""
-            A, P, r, vjp, project = self._operator(x, views, free)
+            A, d, r, vjp, project = self._operator(x, views, free)
             step = jax.tree.map(jnp.negative, project(vjp(r)[0]))
-            return cg(A, P, jax.tree.map(lambda s, v: jnp.where(newton, s, v), step, b), rtol) + (A.mv(b),)
+            return cg(A, d, jax.tree.map(lambda s, v: jnp.where(newton, s, v), step, b), rtol) + (A.mv(b),)
 
         compiled = eqx.filter_jit(solve)
         # newton, free and the tolerance as arrays: as Python scalars they would be static, one
         # program each. A Gauss-Newton step needs only cg_rtol (an inexact step: the next one
         # corrects it); the error solves a hundredth of it.
-        self._solve = lambda x, views, b, newton, free: compiled(
+        self._solve = lambda x, views, b, newton, free, rtol=None: compiled(
             x, views, b, jnp.asarray(newton), jnp.asarray(free, self.dtype),
-            jnp.asarray(self.cg_rtol if newton else 0.01 * self.cg_rtol, self.dtype))
+            jnp.asarray(rtol if rtol is not None else self.cg_rtol if newton else ERROR_RTOL, self.dtype))
 
     # -- the start and the solves --------------------------------------------------------------
     def start_map(self, ell, min_pixels):
@@ -594,9 +631,7 @@ class _Model:
         # made CG take hundreds of iterations
         typical = jnp.sum(jnp.where(seen > 0, d_u, 0.0)) / jnp.maximum(jnp.sum(seen) * 3, 1.0)
         d_u = jnp.where(seen > 0, jnp.maximum(d_u, 0.05 * typical), 1.0)
-        P = lx.FunctionLinearOperator(lambda v: {"u": v["u"] / d_u, "ell": v["ell"] / jnp.maximum(d_ell, 1e-300)},
-                                      structure, tags=lx.positive_semidefinite_tag)
-        return A, P, r, vjp, project
+        return A, {"u": d_u, "ell": jnp.where(free > 0, jnp.maximum(d_ell, 1e-300), 1.0)}, r, vjp, project
 
     def _split(self, flat):
         out, at = [], 0
@@ -649,15 +684,16 @@ class _Model:
             var_u = np.where(seen[..., None], np.asarray(out["u"]), np.inf)
             return var_u, np.asarray(out["ell"]), 0
         # The mean free paths couple every texel of their channel: taken out exactly (Schur complement),
-        # so that the probes see only the texels' own, local block B:
-        # diag(A^-1)_u = diag(B^-1) + Y^2 / S,  Y = B^-1 C,  S = D - C^T Y,  var(ell) = 1 / S
+        # so that the probes see only the texels' own, local block B (the mean free paths held):
+        # diag(A^-1)_u = diag(B^-1) + Y^2 / S with Y = B^-1 C and S = D - C^T Y. One solve of the
+        # whole system on the mean free paths' unit vectors (the channels do not couple: all three
+        # at once) gives x = A^-1 e_ell = (-Y / S, 1 / S): var(ell) = x_ell and Y^2 / S = x_u^2 / x_ell,
+        # without forming S = D - C^T Y, a difference of near-equal numbers where the mean free path
+        # is poorly constrained (it had put a channel's texel errors 1.5-1.9x too wide)
         zeros_u, ones_ell = jnp.zeros(self.shape + (3,), self.dtype), jnp.ones(3, self.dtype)
-        _, _, _, coupled = self._solve(x, self.views, {"u": zeros_u, "ell": ones_ell}, False, 1.0)
-        C, D = np.asarray(coupled["u"]) * seen[..., None], np.asarray(coupled["ell"])
-        Y, cg, _, _ = self._solve(x, self.views, {"u": jnp.asarray(C, self.dtype), "ell": 0 * ones_ell}, False, 0.0)
-        Y = np.asarray(Y["u"]) * seen[..., None]
-        S = D - (C * Y).reshape(-1, 3).sum(0)
-        var_ell = 1.0 / S
+        coupled, cg, _, _ = self._solve(x, self.views, {"u": zeros_u, "ell": ones_ell}, False, 1.0, SCHUR_RTOL)
+        var_ell = np.asarray(coupled["ell"])
+        shared = (np.asarray(coupled["u"]) * seen[..., None]) ** 2 / var_ell
         cg_total = int(cg)
         rng = np.random.default_rng(seed)
         rows, cols = np.indices(self.shape)
@@ -674,4 +710,4 @@ class _Model:
                                               False, 0.0)
                 cg_total += int(cg)
                 var_u = np.where(np.broadcast_to(colour, var_u.shape), signs * np.asarray(value["u"]), var_u)
-        return var_u + Y**2 / S, var_ell, cg_total
+        return var_u + shared, var_ell, cg_total

@@ -85,6 +85,14 @@ The photo's exposure must come from somewhere, since its brightness is gain x R_
 Example, a grey card of 18 % photographed beside the sample:
   jsss-render fit sphere.toml photo.exr --reference-scene card.toml --reference-reflectance 0.18
 Exit status 1 where the exposure is unresolved.
+
+A painted or textured object: --albedo-map [SIZE] fits a colour map (pre-post, d'Eon 2007
+sec. 5.3) and one mean free path per channel, the scene's reduced albedo held (the map carries
+the colour). It writes PHOTO.albedo.exr and PHOTO.albedo_err.exr (unseen texels: infinite
+error) and a PHOTO.fit.toml whose [material.maps] names the map. The exposure is required; the
+highlight is modelled at the scene's roughness. See docs/guides/albedo_maps.md.
+  jsss-render fit plane.toml photo.exr --no-gain --albedo-map 64
+Exit status 1 where the map fit did not converge.
 """
 
 _DESCRIPTION = ("Render TOML scenes of translucent objects to a PNG (display) and an EXR (linear radiance), planning "
@@ -186,6 +194,10 @@ def _fit_parser(commands, methods):
                         "may be wrong by 2 %% or more of the light for a roughness within 2x of the scene's), or model it at "
                         "the scene's roughness; auto (default): fit where the highlight is in the photo and the "
                         "lights are point or directional, else mask")
+    p.add_argument("--albedo-map", nargs="?", const="auto", default=None, metavar="SIZE",
+                   help="fit a colour map (texels per side, or auto: about one per pixel's footprint) and one mean "
+                        "free path per channel instead of sigma_a and sigma_s' (the scene's reduced albedo held); "
+                        "writes PHOTO.albedo.exr, PHOTO.albedo_err.exr and a .fit.toml that renders the map")
     p.add_argument("--rim-mm", type=float, default=0.0,
                    help="leave out pixels within this distance [mm] of an open surface's rim (default 0)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
@@ -425,6 +437,13 @@ def _fit(args) -> int:
         raise UsageError(f"{args.photo}: holds no light (no pixel above 0); a fit needs a photo of the lit object")
     mask = _read_mask(args.mask, photo.shape[:2]) if args.mask else None
     method = None if args.method == "auto" else Method(args.method)
+    if args.albedo_map is not None:
+        from . import _fit_map
+
+        _fit_map.check_flags(args)
+        _fit_map.map_size(args.albedo_map)
+        gain, gain_err, exposure = _exposure(args, photo, say)
+        return _fit_map.fit_map(args, scene, photo, mask, noise, gain, gain_err, exposure, say)
     gain, gain_err, exposure = _exposure(args, photo, say)
     t0 = time.perf_counter()
     result = fit_render(scene, photo, noise=noise, loss=args.loss, mask=mask, saturation=args.saturation, method=method,
