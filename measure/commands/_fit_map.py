@@ -44,13 +44,14 @@ def map_size(text: str) -> int | None:
 
 def check_flags(args) -> None:
     """The fit flags a map fit does not take, named (exit 2)."""
-    refused = [(args.fit_gain, "--fit-gain", "the map's scale and the gain are one direction: give the exposure "
-                "(--reference-scene CARD.toml, --gain G or --no-gain)"),
-               (args.highlight in ("fit", "mask"), f"--highlight {args.highlight}", "the map fit models the "
-                "highlight at the scene's roughness: fit it first (jsss-render fit without --albedo-map) and "
-                "put the roughness in the scene, or --no-specular for a photo of subsurface light only"),
-               (args.method not in ("auto", "texture-space"), f"--method {args.method}", "a map is fitted in "
-                "texture space (the renderer's texels carry it)"),
+    refused = [(args.fit_gain, "--fit-gain", ("the map's scale and the gain are one direction: give the exposure "
+                                               "(--reference-scene CARD.toml, --gain G or --no-gain)")),
+               (args.highlight in ("fit", "mask"), f"--highlight {args.highlight}",
+                ("the map fit models the highlight at the scene's roughness: fit it first (jsss-render fit without "
+                 "--albedo-map) and put the roughness in the scene, or --no-specular for a photo of subsurface "
+                 "light only")),
+               (args.method not in ("auto", "texture-space"), f"--method {args.method}",
+                "a map is fitted in texture space (the renderer's texels carry it)"),
                (args.rim_mm != 0, "--rim-mm", "leave the rim out with --mask instead")]
     for on, flag, why in refused:
         if on:
