@@ -294,6 +294,26 @@ def write_text(out, text: str) -> Path:
     return write_atomically(out, write)
 
 
+def write_fit_files(args, stem: str, as_json: dict, scene_text: str, draw, warnings) -> list[Path]:
+    """A fit's files beside ``args.output``, each atomically: ``STEM.fit.json`` (``as_json``, JSON-safe
+    already), ``STEM.fit.toml`` (``scene_text``) and ``STEM.fit.png`` (``draw(path)``); then its
+    ``warnings`` on stderr and, with ``--json``, the JSON on stdout. Returns the paths written."""
+    import json
+    import sys
+
+    out = Path(args.output)
+    files = {out / f"{stem}.fit.json": json.dumps(as_json, indent=2, allow_nan=False) + "\n",
+             out / f"{stem}.fit.toml": scene_text}
+    for path, text in files.items():
+        write_text(path, text)
+    figure = write_atomically(out / f"{stem}.fit.png", draw)
+    for warning in warnings:
+        print(f"{args.prog}: warning: {warning}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(as_json, allow_nan=False))
+    return [*files, figure]
+
+
 # ----------------------------------------------------------------------------- subcommands
 class _CommandOrDefault(argparse._SubParsersAction):
     """Subcommands, and a default command where the first positional names none.

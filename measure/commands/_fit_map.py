@@ -18,7 +18,6 @@ resolves the exposure); this one checks what the map fit cannot take, runs
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 import time
 from pathlib import Path
@@ -26,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import tomlkit
 
-from ._console import UsageError, json_safe, write_atomically, write_text
+from ._console import UsageError, json_safe, write_fit_files
 
 
 def map_size(text: str) -> int | None:
@@ -102,17 +101,9 @@ def fit_map(args, scene, photo, mask, noise, gain, gain_err, exposure, say) -> i
                                      "errors in the .fit.json and the .albedo_err.exr")
     fitted.add("texturing", "pre-post")
     fitted.add("maps", tomlkit.table().add("albedo", map_path.name))
-    as_json = json_safe(summary)
-    files = {out / f"{stem}.fit.json": json.dumps(as_json, indent=2, allow_nan=False) + "\n",
-             out / f"{stem}.fit.toml": scene_with_material(Path(args.scene).read_text(), fitted)}
-    for path, text in files.items():
-        write_text(path, text)
-    figure = write_atomically(out / f"{stem}.fit.png", lambda tmp: _figure(photo, fit, tmp))
-    for warning in fit.warnings:
-        print(f"{args.prog}: warning: {warning}", file=sys.stderr)
-    if args.json:
-        print(json.dumps(as_json, allow_nan=False))
-    else:
+    written = write_fit_files(args, stem, json_safe(summary), scene_with_material(Path(args.scene).read_text(), fitted),
+                              lambda tmp: _figure(photo, fit, tmp), fit.warnings)
+    if not args.json:
         print(f"fitted {args.photo}: a {fit.albedo.shape[1]} x {fit.albedo.shape[0]} colour map ({int(seen.sum())} "
               f"texels seen) and the mean free path ({profile} profile, {fit.steps} steps, {seconds:.1f} s, "
               f"chi2/dof {fit.chi2_reduced:.2f})")
@@ -121,7 +112,7 @@ def fit_map(args, scene, photo, mask, noise, gain, gain_err, exposure, say) -> i
         if relative.size:
             print(f"  {'map error, median':<24}" + "  ".join(f"{100 * v:.2g} %" for v in np.median(relative, axis=0)))
         print(f"  {'gain':<24}{exposure}")
-    print("wrote " + ", ".join(str(p) for p in [map_path, err_path, *files, figure]),
+    print("wrote " + ", ".join(str(p) for p in [map_path, err_path, *written]),
           file=sys.stderr if args.json else sys.stdout)
     if not fit.converged:
         print(f"{args.prog}: error: the map fit did not converge (see the history in the .fit.json); the map is not "

@@ -18,7 +18,6 @@ here, above both in the dependency order, because it reads photos and writes ima
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -36,9 +35,8 @@ from ._console import (
     json_safe,
     start,
     version,
-    write_atomically,
+    write_fit_files,
     write_png,
-    write_text,
 )
 
 __all__ = ["main", "parser"]
@@ -451,7 +449,6 @@ def _fit(args) -> int:
                         specular=not args.no_specular, highlight=args.highlight, rim_mm=args.rim_mm,
                         progress=lambda line: say(f"{args.scene}: {line}"))
     seconds = time.perf_counter() - t0
-    out = Path(args.output)
     stem = Path(args.photo).name.rsplit(".", 1)[0]
     summary = result.as_dict() | {"scene": str(args.scene), "photo": str(args.photo), "seconds": round(seconds, 3),
                                   "exposure": exposure}
@@ -463,16 +460,9 @@ def _fit(args) -> int:
                              comment=f"fitted by jsss-render fit ({summary['profile_model']} profile, "
                                      f"{summary['method']}); errors in the .fit.json")
     as_json = json_safe(summary)  # an unconstrained parameter's infinite error is null in JSON (inf in the table)
-    files = {out / f"{stem}.fit.json": json.dumps(as_json, indent=2, allow_nan=False) + "\n",
-             out / f"{stem}.fit.toml": scene_with_material(Path(args.scene).read_text(), fitted)}
-    for path, text in files.items():
-        write_text(path, text)
-    figure = write_atomically(out / f"{stem}.fit.png", lambda tmp: _figure(photo, result, tmp))
-    for warning in result.warnings:
-        print(f"{args.prog}: warning: {warning}", file=sys.stderr)
-    if args.json:
-        print(json.dumps(as_json, allow_nan=False))
-    else:
+    written = write_fit_files(args, stem, as_json, scene_with_material(Path(args.scene).read_text(), fitted),
+                              lambda tmp: _figure(photo, result, tmp), result.warnings)
+    if not args.json:
         print(f"fitted {args.photo} ({result.method}, {result.profile_model} profile, {result.n_pixels} pixels, "
               f"{result.steps} steps, {seconds:.1f} s, chi2/dof {result.chi2_reduced:.2f})")
         rows = [("sigma_a [1/mm]", summary["sigma_a"], summary["sigma_a_err"]),
@@ -487,7 +477,7 @@ def _fit(args) -> int:
             "mask": f"masked: {result.highlight_pixels} pixels left out",
             "model": f"modelled at the scene's roughness {result.roughness:g}, held",
             "none": "none in the fit (--no-specular or the scene's specular = 0)"}[result.highlight])
-    print("wrote " + ", ".join(str(p) for p in [*files, figure]), file=sys.stderr if args.json else sys.stdout)
+    print("wrote " + ", ".join(str(p) for p in written), file=sys.stderr if args.json else sys.stdout)
     if result.gain_unresolved:
         print(f"{args.prog}: error: the exposure is unresolved, so R_d and sigma_a are not measurements: add a white "
               "target of known reflectance (--reference-scene CARD.toml, --reference-reflectance) or give the gain "
