@@ -562,17 +562,17 @@ class _Model:
 
         def solve(x, views, b, newton, free, rtol, diagonal):
             """(J^T J)^-1 on the seen texels of ``b``, or, where ``newton``, of -J^T r (the Gauss-Newton
-            step); the mean free paths held where ``free`` is 0. Also (J^T J) b. One program for all,
-            compiled once per fit. ``diagonal``: :meth:`_diagonal` at ``x``."""
-            A, r, vjp, project = self._operator(x, views, free)
+            step); the mean free paths held where ``free`` is 0. One program for all, compiled once
+            per fit. ``diagonal``: :meth:`_diagonal` at ``x``."""
+            A, r, _, vjp, project = self._operator(x, views, free)
             d = {"u": diagonal["u"], "ell": jnp.where(free > 0, diagonal["ell"], 1.0)}
             step = jax.tree.map(jnp.negative, project(vjp(r)[0]))
-            return cg(A, d, jax.tree.map(lambda s, v: jnp.where(newton, s, v), step, b), rtol) + (A.mv(b),)
+            return cg(A, d, jax.tree.map(lambda s, v: jnp.where(newton, s, v), step, b), rtol)
 
         compiled = eqx.filter_jit(solve)
         # newton, free and the tolerance as arrays: as Python scalars they would be static, one
         # program each. A Gauss-Newton step needs only cg_rtol (an inexact step: the next one
-        # corrects it); the error solves a hundredth of it.
+        # corrects it); the error solves ERROR_RTOL, the mean free paths' SCHUR_RTOL.
         self._solve = lambda x, views, b, newton, free, diagonal, rtol=None: compiled(
             x, views, b, jnp.asarray(newton), jnp.asarray(free, self.dtype),
             jnp.asarray(rtol if rtol is not None else self.cg_rtol if newton else ERROR_RTOL, self.dtype), diagonal)
@@ -613,7 +613,7 @@ class _Model:
 
     def _operator(self, x, views, free):
         """J^T J restricted to the fitted texels (identity on the others; on the mean free paths too
-        where ``free`` is 0), the residuals, J^T and the restriction."""
+        where ``free`` is 0), the residuals, J and J^T (linear maps) and the restriction."""
         seen = jnp.asarray(self.free[..., None], self.dtype)
         r, jvp = jax.linearize(lambda y: self._raw(y, views), x)
         vjp = jax.linear_transpose(jvp, x)
@@ -627,7 +627,7 @@ class _Model:
 
         structure = jax.eval_shape(lambda: x)
         A = lx.FunctionLinearOperator(normal, structure, tags=lx.positive_semidefinite_tag)
-        return A, r, vjp, project
+        return A, r, jvp, vjp, project
 
     def _diagonal(self, x, views):
         """diag(J^T J): the texels' by probing J^T J itself (the map coloured on a lattice
@@ -638,7 +638,7 @@ class _Model:
         The scaling CG runs on. An estimate from the pixels each texel covers, weighted by
         (L / s)^2, had been 2.6-16x the true diagonal, unevenly: CG took 322 iterations per
         Gauss-Newton step on the tests' map, 39 with the true diagonal."""
-        A, _, _, _ = self._operator(x, views, jnp.asarray(1.0, self.dtype))
+        A, _, jvp, _, _ = self._operator(x, views, jnp.asarray(1.0, self.dtype))
         zeros_ell = jnp.zeros_like(x["ell"])
         d_u = jnp.sum(jax.lax.map(lambda sign: sign * A.mv({"u": sign, "ell": zeros_ell})["u"], self.diagonal_signs), 0)
         seen = jnp.asarray(self.free[..., None], self.dtype)
@@ -646,7 +646,6 @@ class _Model:
         # A texel whose estimate came out tiny or negative (same-coloured couplings larger than its
         # own curvature: barely seen) is scaled as a thousandth of the typical texel
         d_u = jnp.where(seen > 0, jnp.maximum(d_u, 1e-3 * typical), 1.0)
-        _, jvp = jax.linearize(lambda y: self._raw(y, views), x)
         column = jvp({"u": jnp.zeros_like(x["u"]), "ell": jnp.ones_like(x["ell"])})
         d_ell = jnp.stack([jnp.sum(jnp.concatenate([c.reshape(-1, 3) for c in self._split(column)])[:, k] ** 2)
                            for k in range(3)])
@@ -665,7 +664,7 @@ class _Model:
         cost = float(np.sum(self.residuals(u, ell) ** 2))
         cg_total, converged, n = 0, False, 0
         for n in range(1, max_steps + 1):
-            delta, cg, _, _ = self._solve(x, self.views, jax.tree.map(jnp.zeros_like, x), True, 1.0,
+            delta, cg, _ = self._solve(x, self.views, jax.tree.map(jnp.zeros_like, x), True, 1.0,
                                           self._diagonal_of(x, self.views))
             cg_total += int(cg)
             t = 1.0
@@ -712,7 +711,7 @@ class _Model:
         # is poorly constrained (it had put a channel's texel errors 1.5-1.9x too wide)
         zeros_u, ones_ell = jnp.zeros(self.shape + (3,), self.dtype), jnp.ones(3, self.dtype)
         diagonal = self._diagonal_of(x, self.views)
-        coupled, cg, _, _ = self._solve(x, self.views, {"u": zeros_u, "ell": ones_ell}, False, 1.0, diagonal,
+        coupled, cg, _ = self._solve(x, self.views, {"u": zeros_u, "ell": ones_ell}, False, 1.0, diagonal,
                                         SCHUR_RTOL)
         var_ell = np.asarray(coupled["ell"])
         shared = (np.asarray(coupled["u"]) * seen[..., None]) ** 2 / var_ell
@@ -728,7 +727,7 @@ class _Model:
                 if not colour.any():
                     continue
                 signs = np.where(colour, rng.choice([-1.0, 1.0], size=self.shape + (3,)), 0.0)
-                value, cg, _, _ = self._solve(x, self.views, {"u": jnp.asarray(signs, self.dtype), "ell": 0 * ones_ell},
+                value, cg, _ = self._solve(x, self.views, {"u": jnp.asarray(signs, self.dtype), "ell": 0 * ones_ell},
                                               False, 0.0, diagonal)
                 cg_total += int(cg)
                 var_u = np.where(np.broadcast_to(colour, var_u.shape), signs * np.asarray(value["u"]), var_u)
