@@ -25,7 +25,7 @@ mean free path on the plan's fixed variances (:func:`jsss.render.profiles.render
 :func:`fitting.render.fit_render` does), the colour layer on the way out
 (:meth:`~jsss.render.methods.TextureSpace.texel_exitance`) and the camera pass (single scattering
 under the map, specular held). What else depends on the medium (the oblique-incidence law, the
-deposit depth) is held at the start's; the fit re-plans when the fitted mean free path moves the
+exit law, the deposit depth) is held at the start's; the fit re-plans when the fitted mean free path moves the
 planner's variances.
 
 Solver: Gauss-Newton on the whitened residuals :math:`r = (g L - I)/s`, each step's normal

@@ -53,8 +53,12 @@ examples = os.path.join(os.getcwd(), "..", "examples")
 #   one (the skin's silhouette);
 # * **single scattering**: the first bounce with its own angular law, which replaces its share of
 #   the diffusion light (low-albedo materials such as ketchup);
-# * **camera**: exitance spread over outgoing directions by the exit Fresnel lobe, looked up per
-#   pixel, plus a microfacet specular lobe.
+# * **exit angle**: the angle at which the multiply scattered light leaves. Diffusion spreads it
+#   evenly behind the Fresnel boundary; a half space does not (Chandrasekhar's H(mu0) H(mu)
+#   kernel: ketchup's red leaves more at grazing angles, marble more along the normal), so the
+#   exitance is spread by that kernel of the light arriving at each point;
+# * **camera**: exitance spread over outgoing directions by the exit lobe (the Fresnel lobe, or
+#   the exit-angle pass's), looked up per pixel, plus a microfacet specular lobe.
 
 # %%
 images = {}

@@ -17,7 +17,9 @@ with, all fixed for a scene and plan (:class:`LinearFrame`):
 * :math:`B_{ic}` [W/mm^2 per unit weight] -- the pixel's diffusion exitance of Gaussian
   :math:`i` with unit weight: :math:`(G(v_i) * E)` looked up at the pixel, plus its
   translucent-shadow-map light when that pass runs;
-* :math:`\Lambda_c` [1/sr] -- the exit lobe :math:`F_t(\cos\theta_o, \eta)/(\pi(1 - F_{dr,ext}))`;
+* :math:`\Lambda_c` [1/sr] -- the exit lobe :math:`F_t(\cos\theta_o, \eta)/(\pi(1 - F_{dr,ext}))`,
+  or with the exit-angle pass Chandrasekhar's lobe of the light arriving at the pixel
+  (:mod:`jsss.diffusion.exit_law`);
 * :math:`L^{(1)}_c` [W/(mm^2 sr)], :math:`M^{(1)}_c` [W/mm^2] -- single-scattered radiance and
   exitance at albedo 1 (when the plan runs that pass);
 * :math:`S_c` [W/(mm^2 sr)] -- the specular lobe (when the plan runs it);
@@ -30,7 +32,8 @@ from the stages of :class:`jsss.render.methods.TextureSpace`, the per-pixel part
 :meth:`LinearFrame.radiance` is that frame up to rounding (tested). Away from it, what
 depends on the medium besides the weights and the albedo is held at the plan's: the
 irradiance's oblique-incidence law and the depth at which point lights are read
-(:mod:`jsss.diffusion.incidence`). A fit (:func:`fitting.render.fit_render`) re-plans when
+(:mod:`jsss.diffusion.incidence`). The exit law (:mod:`jsss.diffusion.exit_law`) depends on the
+albedo alone and follows it: :meth:`LinearFrame.radiance` recomputes the lobe from it. A fit (:func:`fitting.render.fit_render`) re-plans when
 those move.
 """
 
@@ -40,13 +43,14 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..diffusion.exit_law import exit_law
 from ..medium import Medium
 from .lighting import lookup
 from .methods import TextureSpace, camera_parts
 from .planner import Plan
 from .renderer import render_params
 from .scene import Scene
-from .shading import frame_radiance
+from .shading import exit_weights, frame_radiance
 
 __all__ = ["LinearFrame", "linear_frame"]
 
@@ -63,6 +67,13 @@ class LinearFrame(eqx.Module):
     single_radiance, single_exitance : (H, W, C) or None, single scattering at albedo 1
         [W/(mm^2 sr)] and [W/mm^2]; None when the plan does not run that pass
     specular : (H, W, C) or None [W/(mm^2 sr)], the surface reflection; None when off
+    exit_weights : (H, W, C, K) or None, with the exit-angle pass the incidence-node weights of
+        the light at each pixel (:func:`jsss.render.shading.exit_weights`): the lobe is then
+        Chandrasekhar's at the albedo :meth:`radiance` is given, and :attr:`exit_lobe` the
+        plan's own; None when off
+    cos_view : (H, W) or None, the exit cosine toward the camera (with ``exit_weights``)
+    eta : (C,) or None, the relative index (with ``exit_weights``)
+    first_bounce_apart : whether single scattering runs apart (the exit law's kernel without it)
     """
 
     basis: jax.Array
@@ -72,20 +83,29 @@ class LinearFrame(eqx.Module):
     single_radiance: jax.Array | None = None
     single_exitance: jax.Array | None = None
     specular: jax.Array | None = None
+    exit_weights: jax.Array | None = None
+    cos_view: jax.Array | None = None
+    eta: jax.Array | None = None
+    first_bounce_apart: bool = eqx.field(static=True, default=False)
 
     def radiance(self, weights, albedo=None):
         r"""Linear radiance (H, W, C) for Gaussian ``weights`` (n, C) on :attr:`variances` and the
         reduced albedo ``albedo`` (C,) :math:`\sigma_s'/\sigma_t'` (read only when the frame has
-        single scattering). Linear in ``weights``; differentiable in both."""
+        single scattering or the exit-angle pass, whose lobe it sets). Linear in ``weights``;
+        differentiable in both."""
         exitance = jnp.einsum("nc,nhwc->hwc", weights.astype(self.basis.dtype), self.basis)
+        if albedo is None and (self.single_radiance is not None or self.exit_weights is not None):
+            raise ValueError("LinearFrame.radiance: this frame has single scattering or the exit-angle pass; pass "
+                             "albedo= (sigma_s' / (sigma_a + sigma_s') per channel).")
         single = None
         if self.single_radiance is not None:
-            if albedo is None:
-                raise ValueError("LinearFrame.radiance: this frame has single scattering; pass albedo= "
-                                 "(sigma_s' / (sigma_a + sigma_s') per channel).")
             single = (albedo * self.single_radiance, albedo * self.single_exitance)
-        return frame_radiance(exitance, self.exit_lobe, self.coverage, single_scattering=single,
-                              specular=self.specular)
+        lobe = self.exit_lobe
+        if self.exit_weights is not None:  # the exit law of a medium of this similarity albedo
+            albedo = jnp.asarray(albedo, self.basis.dtype)
+            law = exit_law(Medium(1 - albedo, albedo, self.eta), first_bounce_apart=self.first_bounce_apart)
+            lobe = law.lobe(self.cos_view, self.exit_weights)
+        return frame_radiance(exitance, lobe, self.coverage, single_scattering=single, specular=self.specular)
 
 
 def linear_frame(scene: Scene, plan: Plan, *, dtype=jnp.float64, blur_dtype=None, prepared=None) -> LinearFrame:
@@ -134,6 +154,15 @@ def linear_frame(scene: Scene, plan: Plan, *, dtype=jnp.float64, blur_dtype=None
         unit = Medium(jnp.zeros(3, dtype), jnp.ones(3, dtype), params.eta)
     lobe, single, specular = camera_parts(params, prepared.shading, dtype, medium=unit)
     single_radiance, single_exitance = (None, None) if single is None else single
+    exit_parts = {}
+    if params.exit_angle is not None:
+        shading = prepared.shading
+        law = exit_law(params.exit_angle, first_bounce_apart=single is not None)   # its weights need eta alone
+        exit_parts = {
+            "exit_weights": exit_weights(law, [g.astype(dtype) for g in shading.lights], params.radiant, params.eta),
+            "cos_view": jnp.asarray((shading.normal * shading.view).sum(-1), dtype), "eta": params.eta,
+            "first_bounce_apart": single is not None}
     return LinearFrame(jnp.stack(images), jnp.asarray(plan.variances, dtype), lobe,
-                       jnp.asarray(prepared.shading.coverage, dtype), single_radiance, single_exitance, specular)
+                       jnp.asarray(prepared.shading.coverage, dtype), single_radiance, single_exitance, specular,
+                       **exit_parts)
 

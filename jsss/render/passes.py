@@ -52,6 +52,7 @@ class Pass(enum.StrEnum):
     TRANSLUCENT_SHADOW_MAPS = "translucent shadow maps"
     SINGLE_SCATTERING = "single scattering"
     OBLIQUE_INCIDENCE = "oblique incidence"
+    EXIT_ANGLE = "exit angle"
     DEPOSIT_DEPTH = "deposit depth"
     SPECULAR = "specular"
     CAMERA = "camera"

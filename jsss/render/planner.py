@@ -52,6 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..diffusion.exit_law import lobe_change
 from ..diffusion.incidence import deposit_depth, incidence_ratio, point_light_loss
 from ..diffusion.single_scattering import single_scattering_share
 from .calibration import (
@@ -429,6 +430,8 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     decisions[Pass.SINGLE_SCATTERING] = _single_scattering_decision(material, target, nodes)
     decisions[Pass.IRRADIANCE] = (True, _irradiance_why(scene, single_scattering=decisions[Pass.SINGLE_SCATTERING][0]))
     decisions[Pass.OBLIQUE_INCIDENCE] = oblique_incidence_decision(material, target, nodes)
+    decisions[Pass.EXIT_ANGLE] = exit_angle_decision(material, target, nodes,
+                                                     first_bounce_apart=decisions[Pass.SINGLE_SCATTERING][0])
     decisions[Pass.DEPOSIT_DEPTH] = deposit_depth_decision(scene, target, nodes)
     spec = material.specular > 0
     decisions[Pass.SPECULAR] = (spec, f"Beckmann m = {material.roughness:g}, weight {material.specular:g}"
@@ -597,6 +600,25 @@ def oblique_incidence_decision(material, target, nodes=None):
     return on, (f"light arriving at 60 degrees returns {shown} % more than a normal beam "
                 f"({'>=' if on else '<'} a quarter of the target, {100 * target / 4:.2g} %); the profiles are for "
                 "normal incidence, so the irradiance is scaled by Chandrasekhar's law")
+
+
+def exit_angle_decision(material, target, nodes=None, *, first_bounce_apart: bool):
+    """On when the light of the material's medium leaves, toward some view, at least a quarter of
+    the target off the flat diffusion lobe (:func:`jsss.diffusion.exit_law.lobe_change`: along the
+    normal, at 60 or at 78 degrees, under a normal beam or uniform light); of the multiply
+    scattered light alone when single scattering runs apart (``first_bounce_apart``). Off for
+    parameter maps (``nodes``): the law is one medium's."""
+    if material.medium is None:
+        return False, f"needs a homogeneous medium; material is {material.kind}"
+    if nodes is not None:
+        return False, "parameter maps: the exit law is one medium's; the flat diffusion lobe is used"
+    change = lobe_change(material.medium, first_bounce_apart=first_bounce_apart) * np.ones(3)
+    on = bool(np.abs(change).max() >= target / 4)
+    shown = "/".join(f"{100 * x:+.1f}" for x in change)
+    light = "multiply scattered light" if first_bounce_apart else "light"
+    return on, (f"the {light} leaves up to {shown} % off the flat diffusion lobe toward some view "
+                f"({'>=' if on else '<'} a quarter of the target, {100 * target / 4:.2g} %)"
+                + ("; spread by Chandrasekhar's kernel of the light that arrives" if on else ""))
 
 
 def deposit_change(scene, nodes=None):

@@ -28,13 +28,14 @@ import jax.numpy as jnp
 import numpy as np
 from numpy import trapezoid
 
+from ..diffusion.exit_law import exit_law
 from ..numerics import interpolate_rows
 from .environment import EnvironmentGeometry, environment_irradiance
 from .image_space import camera_buffers
 from .lighting import irradiance, light_geometry, shadow_map
 from .profiles import exact_profile
 from .scene import Scene
-from .shading import diffuse_radiance
+from .shading import angular_exit_lobe, diffuse_radiance
 
 __all__ = ["ReferenceFrame", "reference_radiance", "surface_samples", "truth_material", "white_lambertian_radiance"]
 
@@ -64,7 +65,8 @@ def white_lambertian_radiance(scene: Scene) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class ReferenceFrame:
     """Diffuse radiance (H, W, 3) and its own Monte Carlo error (relative RMS, from two halves);
-    ``profile``: what was integrated (``"dipole"``, ``"transport"``, ``"layers"``, ``"gaussians"``)."""
+    ``profile``: what was integrated (``"dipole"``, ``"transport"``, ``"layers"``, ``"gaussians"``);
+    ``exit_angle``: whether the exitance left by Chandrasekhar's exit law (else the flat lobe)."""
 
     radiance: np.ndarray
     mask: np.ndarray
@@ -72,6 +74,7 @@ class ReferenceFrame:
     samples: int
     near_radius: float
     profile: str = ""
+    exit_angle: bool = False
 
 
 def surface_samples(mesh, count: int, *, seed: int = 0):
@@ -130,22 +133,33 @@ def truth_material(material, profile_model: str | None = "transport"):
 
 
 def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, chunk: int = 128,
-                       oblique: bool | None = None, profile_model: str | None = None) -> ReferenceFrame:
+                       oblique: bool | None = None, profile_model: str | None = None,
+                       exit_angle: bool | None = None) -> ReferenceFrame:
     """The diffuse radiance of ``scene`` by brute-force surface integration (float64 if enabled).
 
     ``oblique``: scale the irradiance by the oblique-incidence law (:mod:`jsss.diffusion.incidence`);
     default: where the planner would at the scene's accuracy, so that a frame is compared
     with the same physics it was planned to simulate (the deposit-depth pass likewise).
+    ``exit_angle``: spread the exitance by Chandrasekhar's exit law of every order
+    (:mod:`jsss.diffusion.exit_law`) instead of the flat diffusion lobe; default: where the planner
+    would.
     ``profile_model``: ``None`` integrates the material's own profile; ``"transport"`` the
     transport tables' wherever they cover the medium (:func:`truth_material`), the truth the
     planner's calibration measures every method against, the frame's Gaussian fit of its own
     model included.
     """
-    from .planner import deposit_depth_decision, oblique_incidence_decision
+    from .planner import (
+        deposit_depth_decision,
+        exit_angle_decision,
+        oblique_incidence_decision,
+    )
 
     mesh, material = scene.mesh, scene.material
     if oblique is None:
         oblique = oblique_incidence_decision(material, scene.accuracy)[0]
+    if exit_angle is None:
+        exit_angle = exit_angle_decision(material, scene.accuracy, first_bounce_apart=False)[0]
+    exit_angle = exit_angle and material.medium is not None
     oblique_medium = material.medium if oblique and material.medium is not None else None
     deposit_medium = material.medium if material.medium is not None and deposit_depth_decision(
         scene, scene.accuracy)[0] else None
@@ -200,5 +214,11 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     exitance[visible] = M
     exitance = exitance.reshape(buffers.mask.shape + (3,))
     cos_view = (buffers.normal * buffers.view).sum(-1)
-    L = np.asarray(diffuse_radiance(jnp.asarray(exitance), jnp.asarray(cos_view), eta)) * buffers.coverage[..., None]
-    return ReferenceFrame(L, buffers.mask, noise, samples, float(near), profile_name)
+    if exit_angle:  # no single scattering apart here: the lobe of every order
+        law = exit_law(jax.tree_util.tree_map(jnp.asarray, material.medium), first_bounce_apart=False)
+        lobe = angular_exit_lobe(law, jnp.asarray(cos_view), [g.astype(radiant.dtype) for g in pixel_lights],
+                                 radiant, eta)
+        L = exitance * np.asarray(lobe) * buffers.coverage[..., None]
+    else:
+        L = np.asarray(diffuse_radiance(jnp.asarray(exitance), jnp.asarray(cos_view), eta)) * buffers.coverage[..., None]
+    return ReferenceFrame(L, buffers.mask, noise, samples, float(near), profile_name, bool(exit_angle))

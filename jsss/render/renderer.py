@@ -58,6 +58,9 @@ class RenderParams(eqx.Module):
         (:func:`jsss.render.lighting.depth_falloff`), when the plan turns that pass on
     maps : MapParams or None, the material's colour and parameter maps and the basis profiles
         they blend (:mod:`jsss.render.surface_maps`); differentiable in every texel
+    exit_angle : Medium or None, the medium whose exit law (Chandrasekhar's kernel,
+        :mod:`jsss.diffusion.exit_law`) spreads the exitance over angles, when the plan turns that
+        pass on; else the flat diffusion lobe (:func:`jsss.fresnel.exit_lobe`)
     """
 
     weights: jax.Array
@@ -69,6 +72,7 @@ class RenderParams(eqx.Module):
     oblique: Medium | None = None
     deposit: Medium | None = None
     maps: MapParams | None = None
+    exit_angle: Medium | None = None
 
 
 def map_params(scene: Scene, plan: Plan, total, dtype) -> MapParams | None:
@@ -150,8 +154,9 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
         profile = SampledProfile(weights=weights, variances=variances)
     oblique = medium if medium is not None and plan.on(Pass.OBLIQUE_INCIDENCE) else None
     deposit = medium if medium is not None and plan.on(Pass.DEPOSIT_DEPTH) else None
+    exit_angle = medium if medium is not None and plan.on(Pass.EXIT_ANGLE) else None
     return RenderParams(weights, variances, radiant, eta.astype(dtype), profile, medium, oblique,
-                        deposit, map_params(scene, plan, total, dtype))
+                        deposit, map_params(scene, plan, total, dtype), exit_angle)
 
 
 def prepare(scene: Scene, plan: Plan, *, dtype=jnp.float32, timings: dict | None = None):

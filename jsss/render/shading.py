@@ -33,10 +33,10 @@ from ..fresnel import exit_lobe, fresnel_reflectance
 from ..numerics import interpolate_rows
 from ..diffusion.incidence import deposit_depth
 from ..diffusion.single_scattering import single_scattering_albedo, single_scattering_brdf_from_cosines
-from .environment import EnvironmentGeometry, environment_specular
+from .environment import EnvironmentGeometry, environment_irradiance, environment_specular
 from .lighting import depth_falloff
 
-__all__ = ["diffuse_radiance", "frame_radiance", "single_scattering", "specular_radiance", "surface_radiance",
+__all__ = ["angular_exit_lobe", "diffuse_radiance", "exit_weights", "frame_radiance", "single_scattering", "specular_radiance", "surface_radiance",
            "tone_map"]
 
 
@@ -47,6 +47,35 @@ def diffuse_radiance(exitance, cos_view, eta):
     the hemisphere :math:`\int L \cos\theta\,d\omega` is ``exitance`` exactly.
     """
     return exitance * exit_lobe(jnp.asarray(cos_view)[..., None], eta)
+
+
+def exit_weights(law, light_geometry, radiant, eta):
+    """The incidence-node weights (..., C, K) of the light arriving at each point, for
+    :meth:`~jsss.diffusion.exit_law.ExitLaw.lobe`; None when no light is given (uniform light).
+
+    ``law`` an :class:`~jsss.diffusion.exit_law.ExitLaw` (its weights depend on eta alone);
+    ``light_geometry`` the lights at the points (:class:`~jsss.render.lighting.LightGeometry` or
+    :class:`~jsss.render.environment.EnvironmentGeometry`), ``radiant`` (L, C) their colour times
+    intensity, ``eta`` (C,). Each light weighs in with the flux it sends into the point; an
+    environment as uniform light."""
+    weights = None
+    for i, g in enumerate(light_geometry):
+        if isinstance(g, EnvironmentGeometry):
+            term = environment_irradiance(g, radiant[i], eta)[..., None] * law.uniform
+        else:
+            cos = jnp.clip(g.cosine, 0.0, 1.0)
+            term = law.weights(cos, radiant[i] * (cos * g.falloff * g.visible)[..., None])
+        weights = term if weights is None else weights + term
+    return weights
+
+
+def angular_exit_lobe(law, cos_view, light_geometry, radiant, eta):
+    r"""The exit lobe [1/sr] (..., C) of Chandrasekhar's kernel (:mod:`jsss.diffusion.exit_law`)
+    for the light arriving at each point (:func:`exit_weights`): in place of
+    :func:`jsss.fresnel.exit_lobe`. ``cos_view`` (...) is the exit cosine outside; a point no
+    light reaches directly takes uniform light's lobe.
+    """
+    return law.lobe(jnp.asarray(cos_view), exit_weights(law, light_geometry, radiant, eta))
 
 
 ALBEDO_NODES = 129  # cosines on which the single-scattering albedo is tabulated per frame

@@ -45,6 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ...diffusion.exit_law import exit_law
 from ...fresnel import exit_lobe
 from ..environment import EnvironmentGeometry
 from ..image_space import camera_buffers
@@ -52,7 +53,12 @@ from ..lighting import irradiance, light_geometry, node_irradiance, shadow_map
 from ..memory import camera_key, digest, kept, light_key, mesh_key
 from ..passes import Method, Pass
 from ..raster import surface_attributes
-from ..shading import frame_radiance, single_scattering, specular_radiance
+from ..shading import (
+    angular_exit_lobe,
+    frame_radiance,
+    single_scattering,
+    specular_radiance,
+)
 from ..surface_maps import MapSampler, read_points, scaled
 
 if TYPE_CHECKING:
@@ -196,7 +202,9 @@ def camera_parts(params: RenderParams, shading: PixelShading, dtype, *, medium=N
     single_scattering, specular)``.
 
     ``exit_lobe`` (H, W, C) [1/sr] is :math:`F_t(\cos\theta_o, \eta)/(\pi(1 - F_{dr,ext}))`
-    (:func:`jsss.fresnel.exit_lobe`); ``single_scattering`` the pair (radiance [W/(mm^2 sr)],
+    (:func:`jsss.fresnel.exit_lobe`), or where the plan runs the exit-angle pass Chandrasekhar's
+    lobe of the light arriving at the pixel, of the second and later bounces when the first runs
+    apart (:func:`jsss.render.shading.angular_exit_lobe`); ``single_scattering`` the pair (radiance [W/(mm^2 sr)],
     exitance [W/mm^2]) of Jensen 2001's first bounce (:func:`jsss.render.shading.single_scattering`)
     of ``medium`` (default the parameters' own), or None when the plan does not run it or the
     material is not a homogeneous medium; ``specular`` the Beckmann lobe [W/(mm^2 sr)], or None
@@ -221,7 +229,11 @@ def camera_parts(params: RenderParams, shading: PixelShading, dtype, *, medium=N
                 share = coefficients[..., k, :]
                 single = (single[0] + share * radiance, single[1] + share * exitance)
         single = _surface_layer(single, params, shading, dtype)
-    lobe = exit_lobe(cos_view[..., None], params.eta)
+    if params.exit_angle is None:
+        lobe = exit_lobe(cos_view[..., None], params.eta)
+    else:  # the pass "exit angle": the lobe of the light that arrives here (the first bounce's own when apart)
+        law = exit_law(params.exit_angle, first_bounce_apart=single is not None)
+        lobe = angular_exit_lobe(law, cos_view, lights, params.radiant, params.eta)
     specular = None
     if shading.specular:
         specular = specular_radiance(shading.normal, shading.view, lights, params.radiant, params.eta,

@@ -1,9 +1,12 @@
 """The linearised texture-space frame (jsss.render.linear_frame) against the renderer's own frame."""
 
+import dataclasses
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jsss.medium import Medium
 from jsss.render import LinearFrame, linear_frame, parse_scene, plan_scene, render, render_params
 from jsss.render.passes import Pass
 from tests.jsss.render.scenes import scene_dict
@@ -19,7 +22,7 @@ FIN = scene_dict(geometry={"shape": "fin", "thickness": 1.0, "segments": 16},
                  camera={"position": [-100.0, 0.0, 0.0], "fov": 30, "resolution": [32, 32]},
                  render={"texture_size": 64, "accuracy": 0.05})
 EVERY_PASS = (Pass.DIFFUSION, Pass.TRANSLUCENT_SHADOW_MAPS, Pass.SINGLE_SCATTERING, Pass.OBLIQUE_INCIDENCE,
-              Pass.DEPOSIT_DEPTH, Pass.SPECULAR)
+              Pass.EXIT_ANGLE, Pass.DEPOSIT_DEPTH, Pass.SPECULAR)
 
 
 @pytest.fixture(scope="module")
@@ -63,9 +66,10 @@ def test_the_linear_frame_is_the_renderers_frame_at_the_plans_material(fin):
 
 def test_the_linear_frame_is_linear_in_the_weights_and_the_albedo(fin):
     """Twice the weights and the albedo, twice the frame less the specular lobe (fixed); the
-    frame with single scattering asks for the albedo."""
+    frame with single scattering asks for the albedo. (Without the exit-angle pass, whose lobe
+    follows the albedo: the next test.)"""
     scene, plan = fin
-    frame = linear_frame(scene, plan, dtype=jnp.float64)
+    frame = linear_frame(scene, plan.replace(Pass.EXIT_ANGLE, False, "test: linear"), dtype=jnp.float64)
     weights, albedo = _weights_and_albedo(scene, plan)
     once = np.asarray(frame.radiance(weights, albedo))
     twice = np.asarray(frame.radiance(2 * weights, 2 * albedo))
@@ -73,6 +77,25 @@ def test_the_linear_frame_is_linear_in_the_weights_and_the_albedo(fin):
     np.testing.assert_allclose(twice - specular, 2 * (once - specular), rtol=1e-12, atol=1e-14 * np.abs(once).max())
     with pytest.raises(ValueError, match="albedo="):
         frame.radiance(weights)
+
+
+def test_the_exit_lobe_follows_the_albedo(fin):
+    """With the exit-angle pass the lobe is Chandrasekhar's at the albedo given, not the plan's:
+    the frame of the plan's geometry at another medium (similarity albedo 0.95 / 0.92 / 0.83 ->
+    0.75 / 0.6 / 0.5) is render()'s frame of that medium on the same plan (the laws the frame
+    holds, oblique incidence and deposit depth, off on both sides)."""
+    scene, plan = fin
+    plan = plan.replace(Pass.OBLIQUE_INCIDENCE, False, "test: held").replace(Pass.DEPOSIT_DEPTH, False, "test: held")
+    frame = linear_frame(scene, plan, dtype=jnp.float64)
+    other = Medium(np.array([0.3, 0.6, 1.0]), np.array([0.9, 0.9, 1.0]), scene.material.medium.eta)
+    moved = dataclasses.replace(scene, material=dataclasses.replace(scene.material, medium=other))
+    weights, albedo = _weights_and_albedo(moved, plan)
+    ours = np.asarray(frame.radiance(weights, albedo))
+    theirs = np.asarray(render(moved, plan, dtype=jnp.float64).radiance)
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-10 * np.abs(theirs).max())
+    assert np.abs(np.asarray(frame.radiance(weights, albedo)) - np.asarray(
+        dataclasses.replace(frame, exit_weights=None).radiance(weights, albedo))).max() > 1e-3 * np.abs(theirs).max(), \
+        "the lobe held at the plan's albedo would be indistinguishable: the check would not bite"
 
 
 def test_only_texture_space_has_a_linear_frame(fin):
