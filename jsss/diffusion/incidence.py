@@ -34,6 +34,8 @@ frames agree with it to 0.07 % (``benchmarks/transport_truth.py --chandrasekhar`
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -53,6 +55,19 @@ NEWTON_STEPS = 8    # then Newton on the nodes' equations: to 1e-15 at every alb
 def _nodes(dtype):
     x, w = np.polynomial.legendre.leggauss(NODES)
     return jnp.asarray((x + 1) / 2, dtype), jnp.asarray(w / 2, dtype)
+
+
+@functools.cache
+def _lapack_ready() -> None:
+    """Lower one linear solve, once per process, before any program that holds one runs.
+
+    jaxlib fills its LAPACK kernels' function pointers when a solve is *lowered*
+    (``jaxlib.lapack.prepare_lapack_call``); a program loaded from the persistent compilation
+    cache skips lowering, and its first solve then jumped to a null pointer: a segfault in a
+    fresh test worker whose first solve was :func:`h_function`'s Newton step from the cache.
+    Lowering (no compile, nothing cached) costs a few ms.
+    """
+    jax.jit(jnp.linalg.solve).lower(jnp.eye(2), jnp.ones((2, 1)))
 
 
 def _albedo_margin(dtype) -> float:
@@ -96,6 +111,7 @@ def h_function(albedo, mu):
         return H - jnp.linalg.solve(jacobian, (H * g - 1)[..., None])[..., 0]
 
     H = jax.lax.fori_loop(0, ITERATIONS, step, jnp.ones(albedo.shape + (NODES,), dtype))
+    _lapack_ready()
     H = jax.lax.fori_loop(0, NEWTON_STEPS, newton, H)
     # At mu: 1/H(mu) = root + albedo/2 sum_j w_j mu_j H_j / (mu + mu_j); mu = 0 gives H = 1.
     flat = mu.reshape(-1)
