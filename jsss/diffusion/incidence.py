@@ -34,8 +34,6 @@ frames agree with it to 0.07 % (``benchmarks/transport_truth.py --chandrasekhar`
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -57,17 +55,31 @@ def _nodes(dtype):
     return jnp.asarray((x + 1) / 2, dtype), jnp.asarray(w / 2, dtype)
 
 
-@functools.cache
-def _lapack_ready() -> None:
-    """Lower one linear solve, once per process, before any program that holds one runs.
+def _gauss_jordan_solve(matrix, rhs):
+    """``matrix^-1 rhs`` for (..., n, n) and (..., n), by Gauss-Jordan elimination with partial
+    pivoting in plain array operations: no LAPACK call. A program holding jnp.linalg.solve's
+    LAPACK call segfaulted when a fresh process loaded it from the persistent compilation cache
+    (twice in CI, 2026-12-05, in h_function under a gradient); n is 48 here, so this costs
+    nothing measurable."""
+    n = matrix.shape[-1]
+    index = jnp.arange(n)
+    augmented = jnp.concatenate([matrix, rhs[..., None]], -1)                 # (..., n, n + 1)
 
-    jaxlib fills its LAPACK kernels' function pointers when a solve is *lowered*
-    (``jaxlib.lapack.prepare_lapack_call``); a program loaded from the persistent compilation
-    cache skips lowering, and its first solve then jumped to a null pointer: a segfault in a
-    fresh test worker whose first solve was :func:`h_function`'s Newton step from the cache.
-    Lowering (no compile, nothing cached) costs a few ms.
-    """
-    jax.jit(jnp.linalg.solve).lower(jnp.eye(2), jnp.ones((2, 1)))
+    def eliminate(k, m):
+        size = jnp.where(index >= k, jnp.abs(jax.lax.dynamic_index_in_dim(m, k, axis=-1, keepdims=False)), -1.0)
+        pivot_row = jnp.argmax(size, -1)                                      # (...)
+        chosen = jnp.take_along_axis(m, pivot_row[..., None, None], axis=-2)  # (..., 1, n + 1)
+        current = jax.lax.dynamic_slice_in_dim(m, k, 1, axis=-2)                # (..., 1, n + 1)
+        swap_k = (index == k)[:, None]
+        swap_p = (index == pivot_row[..., None])[..., :, None]
+        m = jnp.where(swap_k, chosen, jnp.where(swap_p, current, m))
+        row = jax.lax.dynamic_slice_in_dim(m, k, 1, axis=-2)                    # the pivot row
+        column = jax.lax.dynamic_index_in_dim(m, k, axis=-1, keepdims=False)    # (..., n)
+        factor = jnp.where(index == k, 0.0, column / jax.lax.dynamic_index_in_dim(column, k, axis=-1, keepdims=True))
+        return m - factor[..., :, None] * row
+
+    augmented = jax.lax.fori_loop(0, n, eliminate, augmented)
+    return augmented[..., :, n] / jnp.diagonal(augmented[..., :, :n], axis1=-2, axis2=-1)
 
 
 def _albedo_margin(dtype) -> float:
@@ -108,10 +120,9 @@ def h_function(albedo, mu):
     def newton(_, H):
         g = root + half * (H[..., None, :] * kernel).sum(-1)                    # 1/H's right side
         jacobian = jnp.eye(NODES, dtype=dtype) * g[..., None] + half[..., None] * H[..., :, None] * kernel
-        return H - jnp.linalg.solve(jacobian, (H * g - 1)[..., None])[..., 0]
+        return H - _gauss_jordan_solve(jacobian, H * g - 1)
 
     H = jax.lax.fori_loop(0, ITERATIONS, step, jnp.ones(albedo.shape + (NODES,), dtype))
-    _lapack_ready()
     H = jax.lax.fori_loop(0, NEWTON_STEPS, newton, H)
     # At mu: 1/H(mu) = root + albedo/2 sum_j w_j mu_j H_j / (mu + mu_j); mu = 0 gives H = 1.
     flat = mu.reshape(-1)
