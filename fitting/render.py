@@ -323,8 +323,6 @@ def _incidence_moved(before: Scene, after: Scene) -> float:
     return float(np.max(np.abs(new / old - 1)))
 
 
-
-
 HUBER_K = 1.345  # Huber's threshold in standard errors: 95 % of least squares' efficiency for Gaussian noise
 
 

@@ -56,7 +56,7 @@ from ..medium import Medium
 from ..numerics import as_float_array
 from .incidence import _nodes, h_function, h_function_numpy, largest_albedo
 
-__all__ = ["ExitLaw", "exit_law", "lobe_change", "lobe_over_flat"]
+__all__ = ["ExitLaw", "exit_law", "lobe_change"]
 
 INCIDENCE_NODES = 17         # mu0 = 0, 1/16, ..., 1 (inside): the kernel is linear between them (0.55 % at worst)
 GRAZING = 1.0 / 64           # the first node's kernel is evaluated here: at mu0 = mu = 0 it is 1/0
@@ -91,13 +91,9 @@ class ExitLaw(eqx.Module):
     uniform: jax.Array
     first_bounce: float = eqx.field(static=True)
 
-    def h(self, mu):
-        """:math:`H(\\mu)` per channel, shape ``S + (C,)`` for ``mu`` of shape ``S + (C,)``, by the
-        H equation's Nystrom extension from the solved nodes (no table lookup)."""
-        return 1.0 / (self.root + self.half * self._sums(mu))
-
     def _sums(self, mu):
-        """The H equation's sum :math:`\\sum_j w_j\\mu_j H(\\mu_j)/(\\mu + \\mu_j)`, shape of ``mu``."""
+        """The H equation's sum :math:`\\sum_j w_j\\mu_j H(\\mu_j)/(\\mu + \\mu_j)`, shape of ``mu``:
+        :math:`H(\\mu) = 1/(\\sqrt{1 - \\omega} + (\\omega/2)\\,\\mathrm{sums})` (Nystrom, no table)."""
         return (self.node_terms / (mu[..., None] + self.node_mu)).sum(-1)
 
     def kernel(self, cos_exit):
@@ -121,8 +117,8 @@ class ExitLaw(eqx.Module):
         return fresnel_transmittance(mu, self.eta)[..., None] * s
 
     def weights(self, cos_incident, flux):
-        """Node weights (shape ``S + (C, K + 1)``, the last, uniform light's, 0) of light entering at outside cosine ``cos_incident``
-        (shape ``S``) with ``flux`` (shape ``S + (C,)``, irradiance before the boundary): the
+        """Node weights (shape ``S + (C, K + 1)``, the last, uniform light's, 0) of light entering
+        at outside cosine ``cos_incident`` (shape ``S``) with ``flux`` (shape ``S + (C,)``, irradiance before the boundary): the
         flux times the boundary's transmittance, split linearly over the two nearest incidence
         nodes of the refracted cosine. Sum it over lights for :meth:`lobe`."""
         mu = jnp.clip(as_float_array(cos_incident), 0.0, 1.0)[..., None]
@@ -200,16 +196,9 @@ VIEW_COSINES = (1.0, 0.5, 0.2)   # where the planner weighs the lobe: along the 
 def lobe_change(medium: Medium, *, first_bounce_apart: bool, cosines=VIEW_COSINES) -> np.ndarray:
     r"""How far Chandrasekhar's lobe is from the flat diffusion lobe (:func:`jsss.fresnel.exit_lobe`):
     per channel (shape ``C``, signed), the largest relative change of the radiance toward any of
-    ``cosines`` (outside), under a normal beam and under uniform light (:func:`lobe_over_flat`)."""
-    changes = lobe_over_flat(medium, first_bounce_apart=first_bounce_apart, cosines=cosines) - 1
-    return changes[np.argmax(np.abs(changes), 0), np.arange(changes.shape[1])]
-
-
-def lobe_over_flat(medium: Medium, *, first_bounce_apart: bool, cosines=VIEW_COSINES) -> np.ndarray:
-    r"""Chandrasekhar's lobe over the flat diffusion lobe toward each of ``cosines`` (outside, shape
-    ``V``), under a normal beam (rows ``:V``) and under uniform light (rows ``V:``): shape
-    ``(2V, C)``. In NumPy, for the planner and a fit's re-planning (concrete media only): the
-    same kernel and normalisation as :class:`ExitLaw`, without its incidence nodes."""
+    ``cosines`` (outside), under a normal beam and under uniform light. In NumPy, for the
+    planner (concrete media only): the same kernel and normalisation as :class:`ExitLaw`,
+    without its incidence nodes."""
     sigma_a, sigma_s_prime = np.asarray(medium.sigma_a, float), np.asarray(medium.sigma_s_prime, float)
     albedo = np.atleast_1d(sigma_s_prime / (sigma_a + sigma_s_prime))
     eta = np.broadcast_to(np.asarray(medium.eta, float), albedo.shape)
@@ -236,7 +225,8 @@ def lobe_over_flat(medium: Medium, *, first_bounce_apart: bool, cosines=VIEW_COS
     for kernel in (beam, uniform):
         # lobe / flat lobe = K(view) T_dr / sum_q dmu2 F_t K(q), with T_dr = sum_q dmu2 F_t
         ratios.append(kernel(h_view, view_in) * entering.sum(0) / (entering * kernel(h_quad, quad_in)).sum(0))
-    return np.concatenate(ratios)
+    changes = np.concatenate(ratios) - 1
+    return changes[np.argmax(np.abs(changes), 0), np.arange(albedo.size)]
 
 
 def _transmittance_numpy(cos, eta) -> np.ndarray:

@@ -32,9 +32,9 @@ from the stages of :class:`jsss.render.methods.TextureSpace`, the per-pixel part
 :meth:`LinearFrame.radiance` is that frame up to rounding (tested). Away from it, what
 depends on the medium besides the weights and the albedo is held at the plan's: the
 irradiance's oblique-incidence law and the depth at which point lights are read
-(:mod:`jsss.diffusion.incidence`). The exit law (:mod:`jsss.diffusion.exit_law`) depends on the
-albedo alone and follows it: :meth:`LinearFrame.radiance` recomputes the lobe from it. A fit (:func:`fitting.render.fit_render`) re-plans when
-those move.
+(:mod:`jsss.diffusion.incidence`); a fit (:func:`fitting.render.fit_render`) re-plans when
+those move. The exit law (:mod:`jsss.diffusion.exit_law`) depends on the albedo alone and
+follows it: :meth:`LinearFrame.radiance` recomputes the lobe from it.
 """
 
 from __future__ import annotations
