@@ -12,7 +12,6 @@ jax.config.update("jax_enable_x64", True)
 
 _CACHE_VARIABLE = "JSSS_TEST_RUN_XLA_CACHE"  # set by the process that made the run's cache
 _owned_cache = None
-CACHE_LIMIT = 16 << 30  # bytes: far above a run's programs (it only turns the locking on)
 
 
 def pytest_configure(config):
@@ -30,11 +29,6 @@ def pytest_configure(config):
     os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.1"
     jax.config.update("jax_compilation_cache_dir", directory)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
-    # A size limit turns on JAX's file lock around every read and write of the cache (filelock):
-    # without it a write is a plain write_bytes, and a worker reading a program the other was
-    # still writing segfaulted in deserialisation (twice on 2026-12-05, both workers at once).
-    os.environ["JAX_COMPILATION_CACHE_MAX_SIZE"] = str(CACHE_LIMIT)
-    jax.config.update("jax_compilation_cache_max_size", CACHE_LIMIT)
 
 
 def pytest_unconfigure(config):

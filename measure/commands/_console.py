@@ -35,9 +35,6 @@ class UsageError(ValueError):
     """A problem with the command line or the input files, reported in one line (exit status 2)."""
 
 
-COMPILATION_CACHE_LIMIT = 16 << 30  # bytes: JAX evicts the least recently used programs beyond it
-
-
 def version(prog: str) -> str:
     """``PROG (jsss) VERSION``, from the installed metadata: importing jsss (and JAX) for
     ``--version`` or ``--help`` took 2-6 s."""
@@ -104,11 +101,11 @@ def enable_caches(*, spectra: bool = False) -> Path | None:
     jax.config.update("jax_compilation_cache_dir", str(path))
     if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:  # JAX read it already (the tests set 0.1)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    if "JAX_COMPILATION_CACHE_MAX_SIZE" not in os.environ:
-        # A size limit turns on JAX's file lock (filelock) around the cache's reads and writes:
-        # two commands sharing the folder (a batch, two terminals) could otherwise read a program
-        # the other is still writing, which segfaults.
-        jax.config.update("jax_compilation_cache_max_size", COMPILATION_CACHE_LIMIT)
+    # No size limit (JAX's default). A limit turns on JAX's eviction, which reads an "-atime" file
+    # beside every entry on each write: a folder filled without one (an older jsss, or JAX's own
+    # default) then failed every write with a warning, and each new program cost a scan of the
+    # whole folder (25 ms at 1264 entries). A half-written entry that another process reads fails
+    # to decompress, which JAX reports and recompiles.
     keep_programs_in(path)  # JAX's cache reads only its own *-cache files there
     return path
 

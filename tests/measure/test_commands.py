@@ -264,6 +264,32 @@ def test_enable_caches_turns_on_jax_and_the_program_store_and_an_unwritable_fold
     assert (tmp_path / "jsss" / "xla").is_dir()
 
 
+FILL_SCRIPT = """
+import sys, jax, jax.numpy as jnp
+if sys.argv[2] == "jax":  # JAX's own cache, as a user's scripts or an older jsss filled it
+    jax.config.update("jax_compilation_cache_dir", sys.argv[1])
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+else:
+    from measure.commands._console import start
+    start()
+print(float(jax.jit(lambda x: jnp.sin(x) * float(sys.argv[3]))(jnp.ones(3))[0]))
+"""
+
+
+def test_a_cache_folder_filled_by_plain_jax_takes_the_commands_programs(tmp_path):
+    """A folder of entries without JAX's eviction records ("-atime" files, written only under a
+    size limit) keeps working: with a limit, every write there failed with a warning."""
+    env = {"PATH": "", "HOME": str(tmp_path), "JSSS_CACHE_DIR": str(tmp_path / "jsss")}
+    folder = tmp_path / "jsss" / "xla"
+    for who, factor in (("jax", "2.0"), ("jsss", "3.0")):
+        out = subprocess.run([sys.executable, "-c", FILL_SCRIPT, str(folder), who, factor], capture_output=True,
+                             text=True, env=env, timeout=120)
+        assert out.returncode == 0, out.stderr
+        assert "persistent compilation cache" not in out.stderr, out.stderr
+    entries = sorted(path.name for path in folder.glob("jit__lambda-*-cache"))
+    assert len(entries) == 2, entries  # both programs were written, the command's beside JAX's
+
+
 # ----------------------------------------------------------------------------- jsss, jsss info
 def test_jsss_prints_every_material(capsys):
     """`jsss` prints one line per material with both columns."""
