@@ -1,0 +1,152 @@
+"""Where a default render misses the path tracer per pixel: the plane's edges, and the lateral
+step of the light's last leg toward the camera.
+
+    pip install -e '.[truth]' && python benchmarks/lateral_exit.py [--scene ketchup_plane] [--cache DIR]
+
+The truth is Mitsuba 3's index-matched frame of the example scene (``transport_truth.py``'s
+``index_matched_truth``: the plane is the top of a 30 mm deep box, eta 1, 80 x 60, 4 x 512 spp
+per channel). jsss renders the scene as a user gets it (the planner's method and passes,
+specular off). Printed per channel: the relative RMS error over the pixels that lie more than
+``d`` mm inside the plane's edges (the path tracer's noise taken out), the ratio of sums, and the
+same after resampling jsss's frame at the exit point displaced by the mean lateral step of the
+light's last leg.
+
+**The last leg.** Light leaving a half space toward the camera at the cosine ``mu`` (inside)
+was last scattered at optical depth ``tau`` along the refracted view ray, so at a point a
+lateral ``tau tan(theta) / sigma_t'`` away from the camera. With the emergent intensity
+``I(0, mu)`` proportional to a kernel ``K(mu)``, ``I(0, mu) = J^(1/mu) / mu`` (``J^`` the Laplace
+transform of the source function), so the mean depth is
+
+    <tau>(mu) = -d ln J^(s) / ds at s = 1/mu = mu + mu^2 K'(mu) / K(mu),
+
+and for Chandrasekhar's kernel ``K = H(mu0) H(mu) / (mu0 + mu)`` (every order)
+``<tau> = mu mu0 / (mu + mu0) + mu^2 H'(mu) / H(mu)``: the single-scattering value
+``mu mu0 / (mu + mu0)`` at albedo 0 (H = 1). With isotropic scattering the middle legs'
+lateral steps average to zero, so the mean displacement from entry to exit is the first leg's
+plus the last's; the first leg's (along the light, by reciprocity the same formula with mu and
+mu0 swapped) is printed too. jsss's frame is resampled by linear interpolation over the
+plane's pixels; this measures the effect, it is not the renderer's pass.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import sys
+import tempfile
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+import benchmarks.transport_truth as truth_tools  # enables float64
+from jsss.diffusion.incidence import h_function_numpy
+from jsss.render import load_scene
+from jsss.render.image_space import camera_buffers
+
+EDGE_MARGINS = (0, 3, 5, 10)  # mm inside the plane's edges
+
+
+def mean_last_depth(albedo, mu0, mu, first_bounce=1.0, step=1e-4):
+    """<tau> of the last scattering before exit at the inner cosine ``mu`` (light at ``mu0``):
+    ``mu + mu^2 d ln K / d mu`` for ``K = (H(mu0) H(mu) - 1 + first_bounce) / (mu0 + mu)``."""
+    def log_kernel(m):
+        return np.log(h_function_numpy(albedo, mu0) * h_function_numpy(albedo, m) - (1 - first_bounce)) - np.log(mu0 + m)
+    lo, hi = np.maximum(mu - step, 1e-6), np.minimum(mu + step, 1.0)
+    return mu + mu**2 * (log_kernel(hi) - log_kernel(lo)) / (hi - lo)
+
+
+def displaced(frame, buffers, scene, legs):
+    """``frame`` read where the light entered: each pixel's plane position moved by the mean last
+    leg (away from the eye) and, with ``"entry"`` in ``legs``, back along the first leg."""
+    from scipy.interpolate import LinearNDInterpolator
+
+    medium = scene.material.medium
+    sigma_a, sigma_s = np.asarray(medium.sigma_a, float), np.asarray(medium.sigma_s_prime, float)
+    sigma_t, albedo = sigma_a + sigma_s, sigma_s / (sigma_a + sigma_s)
+    where = buffers.position
+
+    def unit(v):
+        return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+    to_eye = unit(np.asarray(scene.camera.position, float) - where)
+    to_light = unit(np.asarray(scene.lights[0].position, float) - where)
+    mu, mu0 = np.clip(to_eye[..., 2], 0.05, 1.0), np.clip(to_light[..., 2], 0.05, 1.0)
+
+    def tangential_away(d):
+        t = -d[..., :2]
+        return t / np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
+
+    plane = where[..., :2]
+    out = frame.copy()
+    mask = buffers.mask
+    for c in range(frame.shape[-1]):
+        shift = np.zeros_like(plane)
+        if "exit" in legs:
+            step = np.sqrt(1 - mu**2) / mu * mean_last_depth(albedo[c], mu0, mu) / sigma_t[c]
+            shift += step[..., None] * tangential_away(to_eye)
+        if "entry" in legs:
+            step = np.sqrt(1 - mu0**2) / mu0 * mean_last_depth(albedo[c], mu, mu0) / sigma_t[c]
+            shift -= step[..., None] * tangential_away(to_light)
+        values = LinearNDInterpolator(plane[mask], frame[mask][:, c])(plane + shift)
+        out[..., c] = np.where(np.isfinite(values), values, frame[..., c])
+    return out
+
+
+def errors(ours, truth, chunks, keep):
+    """Relative RMS per channel over ``keep`` with the path tracer's noise taken out, and the sums' ratio."""
+    noise = np.var(chunks, axis=0, ddof=1)[keep].mean(0) / len(chunks)
+    mse = ((ours - truth)[keep] ** 2).mean(0) - noise
+    power = (truth[keep] ** 2).mean(0) - noise
+    return np.sqrt(np.maximum(mse, 0) / power), ours[keep].sum(0) / truth[keep].sum(0)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", default="ketchup_plane", help="an example scene with a plane and one point light")
+    parser.add_argument("--spp", type=int, default=512)
+    parser.add_argument("--chunks", type=int, default=4)
+    parser.add_argument("--cache", help="folder keeping the path tracer's frames between runs")
+    args = parser.parse_args(argv)
+
+    scene = load_scene(os.path.join(truth_tools.EXAMPLES, f"{args.scene}.toml"))
+    scene = truth_tools.index_matched(truth_tools._with_resolution(scene, 80, 60))
+    if np.ptp(scene.mesh.vertices[:, 2]) > 1e-9 or len(scene.lights) != 1 or scene.lights[0].kind != "point":
+        raise SystemExit(f"{args.scene}: this benchmark needs a plane under one point light")
+    cached = args.cache and os.path.join(args.cache, f"{args.scene}_{args.spp}x{args.chunks}_index_matched.npy")
+    if cached and os.path.exists(cached):
+        chunks = np.load(cached)
+    else:
+        mi = truth_tools._mitsuba("scalar_rgb")
+        with tempfile.TemporaryDirectory() as folder:
+            _, chunks = truth_tools.index_matched_truth(mi, scene, truth_tools._mesh_file(scene, folder), args.spp,
+                                                        args.chunks)
+        if cached:
+            os.makedirs(args.cache, exist_ok=True)
+            np.save(cached, chunks)
+    truth = chunks.mean(0)
+    buffers = camera_buffers(scene.mesh, scene.camera)
+    inner = truth_tools._interior(buffers.mask)
+    half = np.ptp(scene.mesh.vertices[:, :2], axis=0) / 2
+    centre = scene.mesh.vertices[:, :2].mean(0)
+    inside = np.min(half - np.abs(buffers.position[..., :2] - centre), axis=-1)  # mm to the nearest edge
+
+    ours, passes, plan = truth_tools._ours(scene, None)
+    ours = np.asarray(ours)
+    frames = {"as rendered": ours, "last leg": displaced(ours, buffers, scene, ("exit",)),
+              "last and first legs": displaced(ours, buffers, scene, ("exit", "entry"))}
+    print(f"# {args.scene}, index-matched, 80 x 60, Mitsuba {args.chunks} x {args.spp} spp; jsss default: "
+          f"{plan.method} {plan.knob} ({passes}); {datetime.date.today()}\n")
+    print("| jsss frame | pixels | inside the edges | RMS R / G / B | sums R / G / B |")
+    print("|---|---:|---|---|---|")
+    for name, frame in frames.items():
+        for margin in EDGE_MARGINS:
+            keep = inner & (inside > margin)
+            rms, sums = errors(frame, truth, chunks, keep)
+            print(f"| {name} | {keep.sum()} | > {margin} mm | " + " / ".join(f"{100 * v:.1f} %" for v in rms)
+                  + " | " + " / ".join(f"{v:.3f}" for v in sums) + " |")
+
+
+if __name__ == "__main__":
+    main()
