@@ -11,21 +11,11 @@ specular off). Printed per channel: the relative RMS error over the pixels that 
 same after resampling jsss's frame at the exit point displaced by the mean lateral step of the
 light's last leg.
 
-**The last leg.** Light leaving a half space toward the camera at the cosine ``mu`` (inside)
-was last scattered at optical depth ``tau`` along the refracted view ray, so at a point a
-lateral ``tau tan(theta) / sigma_t'`` away from the camera. With the emergent intensity
-``I(0, mu)`` proportional to a kernel ``K(mu)``, ``I(0, mu) = J^(1/mu) / mu`` (``J^`` the Laplace
-transform of the source function), so the mean depth is
-
-    <tau>(mu) = -d ln J^(s) / ds at s = 1/mu = mu + mu^2 K'(mu) / K(mu),
-
-and for Chandrasekhar's kernel ``K = H(mu0) H(mu) / (mu0 + mu)`` (every order)
-``<tau> = mu mu0 / (mu + mu0) + mu^2 H'(mu) / H(mu)``: the single-scattering value
-``mu mu0 / (mu + mu0)`` at albedo 0 (H = 1). With isotropic scattering the middle legs'
-lateral steps average to zero, so the mean displacement from entry to exit is the first leg's
-plus the last's; the first leg's (along the light, by reciprocity the same formula with mu and
-mu0 swapped) is printed too. jsss's frame is resampled by linear interpolation over the
-plane's pixels; this measures the effect, it is not the renderer's pass.
+**The last leg** (:mod:`jsss.diffusion.lateral_step`, which derives it and tests it against a
+random walk): light leaving toward the camera was last scattered under a point farther from the
+camera, and light entering slanted first scattered farther from the light. jsss's frame is
+resampled there by linear interpolation over the plane's pixels; this measures the effect, it
+is not the renderer's pass.
 """
 
 from __future__ import annotations
@@ -41,20 +31,11 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 import benchmarks.transport_truth as truth_tools  # enables float64
-from jsss.diffusion.incidence import h_function_numpy
+from jsss.diffusion.lateral_step import first_leg_step, last_leg_step
 from jsss.render import load_scene
 from jsss.render.image_space import camera_buffers
 
 EDGE_MARGINS = (0, 3, 5, 10)  # mm inside the plane's edges
-
-
-def mean_last_depth(albedo, mu0, mu, first_bounce=1.0, step=1e-4):
-    """<tau> of the last scattering before exit at the inner cosine ``mu`` (light at ``mu0``):
-    ``mu + mu^2 d ln K / d mu`` for ``K = (H(mu0) H(mu) - 1 + first_bounce) / (mu0 + mu)``."""
-    def log_kernel(m):
-        return np.log(h_function_numpy(albedo, mu0) * h_function_numpy(albedo, m) - (1 - first_bounce)) - np.log(mu0 + m)
-    lo, hi = np.maximum(mu - step, 1e-6), np.minimum(mu + step, 1.0)
-    return mu + mu**2 * (log_kernel(hi) - log_kernel(lo)) / (hi - lo)
 
 
 def displaced(frame, buffers, scene, legs):
@@ -63,8 +44,6 @@ def displaced(frame, buffers, scene, legs):
     from scipy.interpolate import LinearNDInterpolator
 
     medium = scene.material.medium
-    sigma_a, sigma_s = np.asarray(medium.sigma_a, float), np.asarray(medium.sigma_s_prime, float)
-    sigma_t, albedo = sigma_a + sigma_s, sigma_s / (sigma_a + sigma_s)
     where = buffers.position
 
     def unit(v):
@@ -72,7 +51,9 @@ def displaced(frame, buffers, scene, legs):
 
     to_eye = unit(np.asarray(scene.camera.position, float) - where)
     to_light = unit(np.asarray(scene.lights[0].position, float) - where)
-    mu, mu0 = np.clip(to_eye[..., 2], 0.05, 1.0), np.clip(to_light[..., 2], 0.05, 1.0)
+    cos_exit, cos_light = np.clip(to_eye[..., 2], 0.0, 1.0), np.clip(to_light[..., 2], 0.0, 1.0)
+    last = np.asarray(last_leg_step(medium, cos_light, cos_exit))          # (H, W, C) mm, every order
+    first = np.asarray(first_leg_step(medium, cos_light, cos_exit))
 
     def tangential_away(d):
         t = -d[..., :2]
@@ -84,11 +65,9 @@ def displaced(frame, buffers, scene, legs):
     for c in range(frame.shape[-1]):
         shift = np.zeros_like(plane)
         if "exit" in legs:
-            step = np.sqrt(1 - mu**2) / mu * mean_last_depth(albedo[c], mu0, mu) / sigma_t[c]
-            shift += step[..., None] * tangential_away(to_eye)
+            shift += last[..., c, None] * tangential_away(to_eye)
         if "entry" in legs:
-            step = np.sqrt(1 - mu0**2) / mu0 * mean_last_depth(albedo[c], mu, mu0) / sigma_t[c]
-            shift -= step[..., None] * tangential_away(to_light)
+            shift -= first[..., c, None] * tangential_away(to_light)
         values = LinearNDInterpolator(plane[mask], frame[mask][:, c])(plane + shift)
         out[..., c] = np.where(np.isfinite(values), values, frame[..., c])
     return out
