@@ -1,21 +1,20 @@
 """Where a default render misses the path tracer per pixel: the plane's edges, and the lateral
-step of the light's last leg toward the camera.
+step of the light's last leg toward the camera (the pass "last leg").
 
     pip install -e '.[truth]' && python benchmarks/lateral_exit.py [--scene ketchup_plane] [--cache DIR]
 
 The truth is Mitsuba 3's index-matched frame of the example scene (``transport_truth.py``'s
 ``index_matched_truth``: the plane is the top of a 30 mm deep box, eta 1, 80 x 60, 4 x 512 spp
 per channel). jsss renders the scene as a user gets it (the planner's method and passes,
-specular off). Printed per channel: the relative RMS error over the pixels that lie more than
-``d`` mm inside the plane's edges (the path tracer's noise taken out), the ratio of sums, and the
-same after resampling jsss's frame at the exit point displaced by the mean lateral step of the
-light's last leg.
+specular off), and again with the pass "last leg" off. Printed per channel: the relative RMS
+error over the pixels that lie more than ``d`` mm inside the plane's edges (the path tracer's
+noise taken out) and the ratio of sums.
 
-**The last leg** (:mod:`jsss.diffusion.lateral_step`, which derives it and tests it against a
-random walk): light leaving toward the camera was last scattered under a point farther from the
-camera, and light entering slanted first scattered farther from the light. jsss's frame is
-resampled there by linear interpolation over the plane's pixels; this measures the effect, it
-is not the renderer's pass.
+**The last leg** (:mod:`jsss.render.last_leg`; :mod:`jsss.diffusion.lateral_step` derives the
+step and tests it against a random walk): light leaving toward the camera was last scattered
+under a point farther from the camera. **The first leg**, light entering slanted first
+scattered farther from the light, is not a pass: the last row resamples the default frame
+there (linear interpolation over the plane's pixels) to measure what it would change.
 """
 
 from __future__ import annotations
@@ -39,8 +38,8 @@ EDGE_MARGINS = (0, 3, 5, 10)  # mm inside the plane's edges
 
 
 def displaced(frame, buffers, scene, legs):
-    """``frame`` read where the light entered: each pixel's plane position moved by the mean last
-    leg (away from the eye) and, with ``"entry"`` in ``legs``, back along the first leg."""
+    """``frame`` read elsewhere: each pixel's plane position moved, with ``"exit"`` in ``legs``, by
+    the mean last leg (away from the eye) and, with ``"entry"``, back along the first leg."""
     from scipy.interpolate import LinearNDInterpolator
 
     medium = scene.material.medium
@@ -113,8 +112,9 @@ def main(argv=None):
 
     ours, passes, plan = truth_tools._ours(scene, None)
     ours = np.asarray(ours)
-    frames = {"as rendered": ours, "last leg": displaced(ours, buffers, scene, ("exit",)),
-              "last and first legs": displaced(ours, buffers, scene, ("exit", "entry"))}
+    without = np.asarray(truth_tools._ours(scene, None, off=("last leg",))[0])
+    frames = {"as rendered": ours, "last leg off": without,
+              "as rendered, resampled at the first leg": displaced(ours, buffers, scene, ("entry",))}
     print(f"# {args.scene}, index-matched, 80 x 60, Mitsuba {args.chunks} x {args.spp} spp; jsss default: "
           f"{plan.method} {plan.knob} ({passes}); {datetime.date.today()}\n")
     print("| jsss frame | pixels | inside the edges | RMS R / G / B | sums R / G / B |")

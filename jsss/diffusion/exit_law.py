@@ -61,6 +61,7 @@ __all__ = ["ExitLaw", "exit_law", "lobe_change"]
 INCIDENCE_NODES = 17         # mu0 = 0, 1/16, ..., 1 (inside): the kernel is linear between them (0.55 % at worst)
 GRAZING = 1.0 / 64           # the first node's kernel is evaluated here: at mu0 = mu = 0 it is 1/0
 QUADRATURE = 96              # Gauss-Legendre nodes of each normalising integral over the exit cosine
+LAST_LEG_SMALLEST_COSINE = 1e-6  # last_leg_depth's inside cosine is held above 0 (uniform light's slope is log 1/mu)
 UNLIT_SHARE = 1e-3           # of the frame's brightest point's flux: below it a point's lobe leans to uniform light
 
 
@@ -101,6 +102,11 @@ class ExitLaw(eqx.Module):
         and last uniform light's :math:`F_t(\\mu) A(\\mu_i)`: shape ``S + (C, K + 1)``, unnormalised."""
         mu = jnp.clip(as_float_array(cos_exit), 0.0, 1.0)[..., None]            # S + (1,)
         inside = refracted_cosine(mu, self.eta)                                 # S + (C,)
+        return fresnel_transmittance(mu, self.eta)[..., None] * self._inside_kernel(inside)
+
+    def _inside_kernel(self, inside):
+        """:math:`S(\\mu_i, \\mu_{0,k})` and uniform light's :math:`A(\\mu_i)` at the inside exit
+        cosine ``inside`` (shape ``S + (C,)``): shape ``S + (C, K + 1)``, no boundary."""
         sums = self._sums(inside)
         h_exit = 1.0 / (self.root + self.half * sums)
         incident = _incidence_mu(inside.dtype)                                  # (K,)
@@ -113,8 +119,7 @@ class ExitLaw(eqx.Module):
         log_term = jnp.where(positive, inside * jnp.log1p(1 / jnp.where(positive, inside, 1.0)), 0.0)
         lead = 2 / (1 + self.root)
         uniform = lead - self.root * h_exit * (lead - sums) - self.first_bounce * (1 - log_term)
-        s = jnp.concatenate([s, uniform[..., None]], -1)
-        return fresnel_transmittance(mu, self.eta)[..., None] * s
+        return jnp.concatenate([s, uniform[..., None]], -1)
 
     def weights(self, cos_incident, flux):
         """Node weights (shape ``S + (C, K + 1)``, the last, uniform light's, 0) of light entering
@@ -137,20 +142,49 @@ class ExitLaw(eqx.Module):
         only through the blur) the uniform kernel takes over smoothly: a point is given
         ``UNLIT_SHARE`` of the brightest point's flux as uniform light."""
         kernel = self.kernel(cos_exit)
-        if weights is None:
-            weights = jnp.broadcast_to(self.uniform, kernel.shape)
-        else:
-            per_point = weights.sum(-1)                                          # S + (C,)
-            # (not held under differentiation: the lobe stays of degree 0 in the light's intensity)
-            scale = per_point.reshape(-1, per_point.shape[-1]).max(0)
-            scale = jnp.where(scale > 0, scale, 1.0)
-            weights = weights + UNLIT_SHARE * scale[..., None] * self.uniform
+        weights = self._mixed(weights, kernel.shape)
         total = (weights * self.norm).sum(-1)
         # A medium that returns no multiply scattered light (albedo 0) has no kernel: the flat lobe.
         flat = fresnel_transmittance(jnp.clip(as_float_array(cos_exit), 0.0, 1.0)[..., None], self.eta) \
             / (jnp.pi * diffuse_fresnel_transmittance(self.eta))
         ok = total > 0
         return jnp.where(ok, (weights * kernel).sum(-1) / jnp.where(ok, total, 1.0), flat)
+
+
+    def _mixed(self, weights, shape):
+        """The node weights a point's lobe is mixed with (:meth:`lobe`): uniform light's where
+        ``weights`` is None, else ``weights`` plus ``UNLIT_SHARE`` of the frame's brightest
+        point's flux as uniform light."""
+        if weights is None:
+            return jnp.broadcast_to(self.uniform, shape)
+        per_point = weights.sum(-1)                                              # S + (C,)
+        # (not held under differentiation: the lobe stays of degree 0 in the light's intensity)
+        scale = per_point.reshape(-1, per_point.shape[-1]).max(0)
+        scale = jnp.where(scale > 0, scale, 1.0)
+        return weights + UNLIT_SHARE * scale[..., None] * self.uniform
+
+    def last_leg_depth(self, cos_exit, weights=None):
+        r"""Mean optical depth :math:`\langle\tau\rangle` (in :math:`1/\sigma_t'`) at which the light
+        leaving toward outside cosine ``cos_exit`` (shape ``S``) was last scattered, and the
+        inside cosine :math:`\mu` of its last leg: two arrays of shape ``S + (C,)``.
+
+        For light that arrived with node ``weights`` (as :meth:`lobe`: a mix of the nodes'
+        kernels, so of their Laplace transforms; :mod:`jsss.diffusion.lateral_step` derives it):
+
+        .. math:: \langle\tau\rangle = \mu + \mu^2\,
+                  \frac{\sum_k w_k\,\partial_\mu S_k(\mu)}{\sum_k w_k\,S_k(\mu)}.
+
+        The boundary's transmittance scales the light that leaves, not where it was scattered:
+        it does not enter. At one incidence node this is
+        :func:`jsss.diffusion.lateral_step.last_leg_step`'s depth (tested)."""
+        mu = jnp.clip(as_float_array(cos_exit), 0.0, 1.0)[..., None]
+        inside = jnp.maximum(refracted_cosine(mu, self.eta), LAST_LEG_SMALLEST_COSINE)    # S + (C,)
+        kernel, slope = jax.jvp(self._inside_kernel, (inside,), (jnp.ones_like(inside),))
+        weights = self._mixed(weights, kernel.shape)
+        total = (weights * kernel).sum(-1)
+        ok = total > 0   # albedo 0 with the first bounce apart returns nothing to place
+        ratio = jnp.where(ok, (weights * slope).sum(-1) / jnp.where(ok, total, 1.0), 0.0)
+        return inside + inside**2 * ratio, inside
 
 
 def _incidence_mu(dtype):

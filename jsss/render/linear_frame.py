@@ -32,7 +32,8 @@ from the stages of :class:`jsss.render.methods.TextureSpace`, the per-pixel part
 :meth:`LinearFrame.radiance` is that frame up to rounding (tested). Away from it, what
 depends on the medium besides the weights and the albedo is held at the plan's: the
 irradiance's oblique-incidence law and the depth at which point lights are read
-(:mod:`jsss.diffusion.incidence`); a fit (:func:`fitting.render.fit_render`) re-plans when
+(:mod:`jsss.diffusion.incidence`), and the last leg's step and the first bounce's share of
+its move (:mod:`jsss.render.last_leg`); a fit (:func:`fitting.render.fit_render`) re-plans when
 those move. The exit law (:mod:`jsss.diffusion.exit_law`) depends on the albedo alone and
 follows it: :meth:`LinearFrame.radiance` recomputes the lobe from it.
 """
@@ -45,6 +46,7 @@ import jax.numpy as jnp
 
 from ..diffusion.exit_law import exit_law
 from ..medium import Medium
+from .last_leg import moved_ratio
 from .lighting import lookup
 from .methods import TextureSpace, camera_parts
 from .planner import Plan
@@ -143,17 +145,26 @@ def linear_frame(scene: Scene, plan: Plan, *, dtype=jnp.float64, blur_dtype=None
     params = render_params(scene, plan, dtype=dtype)
     low = render_params(scene, plan, dtype=blur_dtype)
     blurred = method.diffusion(low, prepared, method.irradiance(low, prepared))
-    images = []
+    images, at_pixels = [], []
     for i in range(len(plan.variances)):  # exitance is linear in the weights: one image per variance, unit weight
         term = eqx.tree_at(lambda p: (p.weights, p.variances), low,
                            (jnp.ones((1, 3), blur_dtype), low.variances[i:i + 1]))
         M = method.texel_exitance(term, prepared, blurred[i:i + 1])
-        images.append(lookup(M, prepared.pixel_uv, prepared.texels.mask).astype(dtype))
+        # With the pass "last leg" each channel is read where its light was last scattered, the
+        # step held at the plan's medium (as the irradiance's laws are).
+        images.append(method.pixel_exitance(term, prepared, M).astype(dtype))
+        at_pixels.append(lookup(M, prepared.pixel_uv, prepared.texels.mask).astype(dtype))
     unit = None  # single scattering at albedo 1: the geometry's factor alone
     if params.medium is not None:
         unit = Medium(jnp.zeros(3, dtype), jnp.ones(3, dtype), params.eta)
     lobe, single, specular = camera_parts(params, prepared.shading, dtype, medium=unit)
     single_radiance, single_exitance = (None, None) if single is None else single
+    if single is not None and params.last_leg is not None and prepared.uv_per_mm is not None:
+        # The first bounce moves with the exitance, by the ratio at the plan's weights (held, as the step)
+        weights = params.weights.astype(dtype)
+        ratio = moved_ratio(jnp.einsum("nc,nhwc->hwc", weights, jnp.stack(images)),
+                            jnp.einsum("nc,nhwc->hwc", weights, jnp.stack(at_pixels)))
+        single_radiance, single_exitance = single_radiance * ratio, single_exitance * ratio
     exit_parts = {}
     if params.exit_angle is not None:
         shading = prepared.shading

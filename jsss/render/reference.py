@@ -32,6 +32,7 @@ from ..diffusion.exit_law import exit_law
 from ..numerics import interpolate_rows
 from .environment import EnvironmentGeometry, environment_irradiance
 from .image_space import camera_buffers
+from .last_leg import away_from_eye, last_leg_steps
 from .lighting import irradiance, light_geometry, shadow_map
 from .profiles import exact_profile
 from .scene import Scene
@@ -66,7 +67,9 @@ def white_lambertian_radiance(scene: Scene) -> np.ndarray:
 class ReferenceFrame:
     """Diffuse radiance (H, W, 3) and its own Monte Carlo error (relative RMS, from two halves);
     ``profile``: what was integrated (``"dipole"``, ``"transport"``, ``"layers"``, ``"gaussians"``);
-    ``exit_angle``: whether the exitance left by Chandrasekhar's exit law (else the flat lobe)."""
+    ``exit_angle``: whether the exitance left by Chandrasekhar's exit law (else the flat lobe);
+    ``last_leg``: whether each channel was integrated around the point its light was last
+    scattered under (:mod:`jsss.render.last_leg`)."""
 
     radiance: np.ndarray
     mask: np.ndarray
@@ -75,6 +78,7 @@ class ReferenceFrame:
     near_radius: float
     profile: str = ""
     exit_angle: bool = False
+    last_leg: bool = False
 
 
 def surface_samples(mesh, count: int, *, seed: int = 0):
@@ -134,7 +138,7 @@ def truth_material(material, profile_model: str | None = "transport"):
 
 def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, chunk: int = 128,
                        oblique: bool | None = None, profile_model: str | None = None,
-                       exit_angle: bool | None = None) -> ReferenceFrame:
+                       exit_angle: bool | None = None, last_leg: bool | None = None) -> ReferenceFrame:
     """The diffuse radiance of ``scene`` by brute-force surface integration (float64 if enabled).
 
     ``oblique``: scale the irradiance by the oblique-incidence law (:mod:`jsss.diffusion.incidence`);
@@ -143,6 +147,9 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     ``exit_angle``: spread the exitance by Chandrasekhar's exit law of every order
     (:mod:`jsss.diffusion.exit_law`) instead of the flat diffusion lobe; default: where the planner
     would.
+    ``last_leg``: integrate each channel around the point its light toward the camera was last
+    scattered under, the mean step of :mod:`jsss.render.last_leg` away from the eye; default:
+    where the physics calls for it (:func:`jsss.render.planner.last_leg_decision`, whatever method).
     ``profile_model``: ``None`` integrates the material's own profile; ``"transport"`` the
     transport tables' wherever they cover the medium (:func:`truth_material`), the truth the
     planner's calibration measures every method against, the frame's Gaussian fit of its own
@@ -151,6 +158,7 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     from .planner import (
         deposit_depth_decision,
         exit_angle_decision,
+        last_leg_decision,
         oblique_incidence_decision,
     )
 
@@ -160,6 +168,9 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     if exit_angle is None:
         exit_angle = exit_angle_decision(material, scene.accuracy, first_bounce_apart=False)[0]
     exit_angle = exit_angle and material.medium is not None
+    if last_leg is None:
+        last_leg = last_leg_decision(scene, scene.accuracy)[0]
+    last_leg = last_leg and material.medium is not None
     oblique_medium = material.medium if oblique and material.medium is not None else None
     deposit_medium = material.medium if material.medium is not None and deposit_depth_decision(
         scene, scene.accuracy)[0] else None
@@ -169,7 +180,18 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     eta = jnp.broadcast_to(jnp.asarray(material.eta, float), (3,))
     pixel_lights = [light_geometry(buffers.position, buffers.normal, buffers.mask, light, m)
                     for light, m in zip(scene.lights, maps)]
-    E_pixel = np.asarray(irradiance(pixel_lights, radiant, eta, medium=oblique_medium, deposit=deposit_medium))
+    E_pixel = np.array(irradiance(pixel_lights, radiant, eta, medium=oblique_medium, deposit=deposit_medium))
+    centres = np.broadcast_to(buffers.position[..., None, :], buffers.position.shape[:-1] + (3, 3))  # per channel
+    if last_leg:  # each channel's point moved along the tangent plane, away from the eye, and lit there
+        medium = jax.tree_util.tree_map(jnp.asarray, material.medium)
+        steps = np.asarray(last_leg_steps(medium, buffers.normal, buffers.view, pixel_lights, radiant, radiant.dtype,
+                                          first_bounce_apart=False))            # (H, W, 3) mm
+        centres = centres + steps[..., None] * away_from_eye(buffers.normal, buffers.view)[..., None, :]
+        for c in range(3):
+            moved = [light_geometry(centres[..., c, :], buffers.normal, buffers.mask, light, m)
+                     for light, m in zip(scene.lights, maps)]
+            E_pixel[..., c] = np.asarray(irradiance(moved, radiant, eta, medium=oblique_medium,
+                                                    deposit=deposit_medium))[..., c]
     position, normal, area = surface_samples(mesh, samples, seed=seed)
     sample_lights = [light_geometry(position, normal, np.ones(len(position), bool), light, m)
                      for light, m in zip(scene.lights, maps)]
@@ -198,11 +220,22 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
         contribution = jnp.where((d >= near)[..., None], profile(d) * Es[None], 0.0)
         return contribution[:, 0::2].sum(1), contribution[:, 1::2].sum(1)
 
+    @jax.jit
+    def far_field_per_channel(xs):  # xs (P, C, 3): each channel about its own point
+        d = jnp.sqrt(jnp.sum((xs[:, None, :, :] - ys[None, :, None]) ** 2, -1))  # (P, N, C)
+        x = jnp.clip((jnp.log(jnp.maximum(d, r[1])) - log_first) / log_step, 0.0, n - 1.0)
+        low = jnp.minimum(jnp.floor(x).astype(jnp.int32), n - 2)
+        t, channel = x - low, jnp.arange(d.shape[-1])
+        values = jnp.exp((1 - t) * log_table[low, channel] + t * log_table[low + 1, channel])
+        contribution = jnp.where(d >= near, values * Es[None], 0.0)
+        return contribution[:, 0::2].sum(1), contribution[:, 1::2].sum(1)
+
     visible = np.flatnonzero(buffers.mask.ravel())
-    points = buffers.position.reshape(-1, 3)[visible]
+    points = (centres.reshape(-1, 3, 3) if last_leg else buffers.position.reshape(-1, 3))[visible]
+    integrate = far_field_per_channel if last_leg else far_field
     first, second = [], []
     for start in range(0, len(points), chunk):
-        a, b = far_field(jnp.asarray(points[start:start + chunk]))
+        a, b = integrate(jnp.asarray(points[start:start + chunk]))
         first.append(np.asarray(a))
         second.append(np.asarray(b))
     first, second = np.concatenate(first), np.concatenate(second)
@@ -221,4 +254,5 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
         L = exitance * np.asarray(lobe) * buffers.coverage[..., None]
     else:
         L = np.asarray(diffuse_radiance(jnp.asarray(exitance), jnp.asarray(cos_view), eta)) * buffers.coverage[..., None]
-    return ReferenceFrame(L, buffers.mask, noise, samples, float(near), profile_name, bool(exit_angle))
+    return ReferenceFrame(L, buffers.mask, noise, samples, float(near), profile_name, bool(exit_angle),
+                          bool(last_leg))

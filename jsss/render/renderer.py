@@ -61,6 +61,8 @@ class RenderParams(eqx.Module):
     exit_angle : Medium or None, the medium whose exit law (Chandrasekhar's kernel,
         :mod:`jsss.diffusion.exit_law`) spreads the exitance over angles, when the plan turns that
         pass on; else the flat diffusion lobe (:func:`jsss.fresnel.exit_lobe`)
+    last_leg : Medium or None, the medium whose last leg below the surface moves where the camera
+        reads the exitance (:mod:`jsss.render.last_leg`), when the plan turns that pass on
     """
 
     weights: jax.Array
@@ -73,6 +75,7 @@ class RenderParams(eqx.Module):
     deposit: Medium | None = None
     maps: MapParams | None = None
     exit_angle: Medium | None = None
+    last_leg: Medium | None = None
 
 
 def map_params(scene: Scene, plan: Plan, total, dtype) -> MapParams | None:
@@ -155,8 +158,9 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
     oblique = medium if medium is not None and plan.on(Pass.OBLIQUE_INCIDENCE) else None
     deposit = medium if medium is not None and plan.on(Pass.DEPOSIT_DEPTH) else None
     exit_angle = medium if medium is not None and plan.on(Pass.EXIT_ANGLE) else None
+    last_leg = medium if medium is not None and plan.on(Pass.LAST_LEG) else None
     return RenderParams(weights, variances, radiant, eta.astype(dtype), profile, medium, oblique,
-                        deposit, map_params(scene, plan, total, dtype), exit_angle)
+                        deposit, map_params(scene, plan, total, dtype), exit_angle, last_leg)
 
 
 def prepare(scene: Scene, plan: Plan, *, dtype=jnp.float32, timings: dict | None = None):

@@ -255,7 +255,7 @@ def _surface_layer(single, params: RenderParams, shading: PixelShading, dtype):
     return single[0] * scale, single[1] * scale
 
 
-def camera_radiance(exitance, params: RenderParams, shading: PixelShading):
+def camera_radiance(exitance, params: RenderParams, shading: PixelShading, *, single_scale=None):
     r"""Linear radiance (H, W, 3) [W/(mm^2 sr)] toward the camera of the diffusion exitance
     ``exitance`` (H, W, C) [W/mm^2] of each pixel's surface point.
 
@@ -266,10 +266,13 @@ def camera_radiance(exitance, params: RenderParams, shading: PixelShading):
     :math:`L^{(1)}` and exitance :math:`M^{(1)}` of the medium when the pass runs (it replaces its
     share of the diffusion light: :func:`jsss.render.shading.surface_radiance`), the specular
     lobe :math:`L_s` when it runs, and the pixel's coverage :math:`c` (:func:`camera_parts`,
-    :func:`jsss.render.shading.frame_radiance`).
+    :func:`jsss.render.shading.frame_radiance`). ``single_scale`` (H, W, C): the first bounce's
+    radiance and exitance times it (the pass "last leg", :mod:`jsss.render.last_leg`).
     """
     dtype = exitance.dtype
     lobe, single, specular = camera_parts(params, shading, dtype)
+    if single is not None and single_scale is not None:
+        single = (single[0] * single_scale, single[1] * single_scale)
     return frame_radiance(exitance, lobe, jnp.asarray(shading.coverage, dtype), single_scattering=single,
                           specular=specular)
 

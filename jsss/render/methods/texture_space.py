@@ -27,6 +27,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..blur import blur_schedule, hierarchical_blur, uniform_stretch
+from ..last_leg import (
+    last_leg_steps,
+    moved_ratio,
+    shifted_lookup,
+    uv_per_mm_away_from_eye,
+)
 from ..lighting import lookup, translucent_transmission
 from ..memory import camera_key, kept, mesh_key
 from ..mesh import is_closed
@@ -64,6 +70,8 @@ class TexturePrepared(PreparedGeometry):
     open_margin : int, unlit texels padded around the texture of an open surface (see :meth:`TextureSpace.diffusion`)
     colour_map, coefficient_map : MapSampler or None, where each texel reads the material's colour
         map (bilinearly) and parameter maps (the map texel it falls in) (:mod:`jsss.render.surface_maps`)
+    uv_per_mm : (H, W, 2) or None, how far each pixel's UV moves per mm away from the eye, when the
+        plan runs the pass "last leg" (:mod:`jsss.render.last_leg`)
     """
 
     texels: TexelGeometry
@@ -77,6 +85,7 @@ class TexturePrepared(PreparedGeometry):
     open_margin: int = 0
     colour_map: MapSampler | None = None
     coefficient_map: MapSampler | None = None
+    uv_per_mm: np.ndarray | None = None
 
 
 def _stretch(texels: TexelGeometry, correct: bool):
@@ -163,9 +172,14 @@ class TextureSpace(RenderMethod):
             coefficient_map = kept("texel map sampler", (self.size, maps.sigma_a.shape[:2], texels.wrap_u, True),
                                    lambda: MapSampler.texels(self.size, maps.sigma_a.shape[:2], wrap_u=texels.wrap_u,
                                                              nearest=True))
+        uv_per_mm = None
+        if plan.on(Pass.LAST_LEG):
+            mesh = scene.mesh
+            uv_per_mm = kept("camera uv per mm", (mesh_id, at_camera), lambda: uv_per_mm_away_from_eye(
+                mesh.vertices, mesh.faces, mesh.uvs, camera.raster, camera.normal, camera.view))
         return TexturePrepared(texels, texel_lights, camera.mask, uv, pixel_shading(scene, plan, camera, pixel_lights),
                                stretch, schedule, plan.on(Pass.TRANSLUCENT_SHADOW_MAPS), margin, colour_map,
-                               coefficient_map)
+                               coefficient_map, uv_per_mm)
 
     @staticmethod
     def surface(params, prepared: TexturePrepared, dtype):
@@ -241,9 +255,28 @@ class TextureSpace(RenderMethod):
         return scaled(M, exit_)  # and the colour layer on the way out
 
     def camera(self, params, prepared: TexturePrepared, M):
-        """Radiance (H, W, 3): the texel exitance looked up at each pixel, through the camera pass."""
+        """Radiance (H, W, 3): the texel exitance looked up at each pixel, through the camera pass.
+
+        With the pass "last leg" each channel's subsurface light (diffusion and first bounce) is
+        read where it was last scattered: the exitance at the moved point, and the first bounce
+        scaled by the same ratio (:mod:`jsss.render.last_leg`)."""
         exitance = lookup(M, prepared.pixel_uv, prepared.texels.mask)
-        return camera_radiance(exitance, params, prepared.shading)
+        if prepared.uv_per_mm is None or params.last_leg is None:
+            return camera_radiance(exitance, params, prepared.shading)
+        moved = self.pixel_exitance(params, prepared, M)
+        return camera_radiance(moved, params, prepared.shading, single_scale=moved_ratio(moved, exitance))
+
+    @staticmethod
+    def pixel_exitance(params, prepared: TexturePrepared, textures):
+        """The texel exitance ``textures`` (..., S, S, C) read at each pixel (..., H, W, C): at its
+        UV, or with the pass "last leg" each channel at the mean step of its last leg (every
+        order's) farther from the eye (:mod:`jsss.render.last_leg`)."""
+        if prepared.uv_per_mm is None or params.last_leg is None:
+            return lookup(textures, prepared.pixel_uv, prepared.texels.mask)
+        shading = prepared.shading
+        steps = last_leg_steps(params.last_leg, shading.normal, shading.view, shading.lights, params.radiant,
+                               textures.dtype, first_bounce_apart=False)
+        return shifted_lookup(textures, prepared.pixel_uv, prepared.uv_per_mm, steps, prepared.texels.mask)
 
     def exitance(self, params, prepared: TexturePrepared):
         """Exitance per texel (S, S, C) [W/mm^2]: irradiance, diffusion, weighted sum (and translucency)."""
