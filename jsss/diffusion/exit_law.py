@@ -177,14 +177,25 @@ class ExitLaw(eqx.Module):
         The boundary's transmittance scales the light that leaves, not where it was scattered:
         it does not enter. At one incidence node this is
         :func:`jsss.diffusion.lateral_step.last_leg_step`'s depth (tested)."""
+        kernel, slope, inside = self.last_leg_table(cos_exit)
+        return self.mixed_depth(inside, kernel, slope, weights), inside
+
+    def last_leg_table(self, cos_exit):
+        """What :meth:`last_leg_depth` mixes, at outside cosines ``cos_exit`` (shape ``S``): the
+        kernels :math:`S_k(\\mu)` and their slopes :math:`\\partial_\\mu S_k` (shape ``S + (C, K + 1)``)
+        and the inside cosine :math:`\\mu` (shape ``S + (C,)``), held above 0."""
         mu = jnp.clip(as_float_array(cos_exit), 0.0, 1.0)[..., None]
         inside = jnp.maximum(refracted_cosine(mu, self.eta), LAST_LEG_SMALLEST_COSINE)    # S + (C,)
         kernel, slope = jax.jvp(self._inside_kernel, (inside,), (jnp.ones_like(inside),))
+        return kernel, slope, inside
+
+    def mixed_depth(self, inside, kernel, slope, weights=None):
+        """:math:`\\langle\\tau\\rangle` of :meth:`last_leg_depth` from :meth:`last_leg_table`'s parts."""
         weights = self._mixed(weights, kernel.shape)
         total = (weights * kernel).sum(-1)
         ok = total > 0   # albedo 0 with the first bounce apart returns nothing to place
         ratio = jnp.where(ok, (weights * slope).sum(-1) / jnp.where(ok, total, 1.0), 0.0)
-        return inside + inside**2 * ratio, inside
+        return inside + inside**2 * ratio
 
 
 def _incidence_mu(dtype):

@@ -434,8 +434,7 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     decisions[Pass.EXIT_ANGLE] = exit_angle_decision(material, target, nodes,
                                                      first_bounce_apart=decisions[Pass.SINGLE_SCATTERING][0])
     decisions[Pass.DEPOSIT_DEPTH] = deposit_depth_decision(scene, target, nodes)
-    decisions[Pass.LAST_LEG] = last_leg_decision(scene, target, nodes, method=method,
-                                                 first_bounce_apart=decisions[Pass.SINGLE_SCATTERING][0])
+    decisions[Pass.LAST_LEG] = last_leg_decision(scene, target, nodes, method=method)
     spec = material.specular > 0
     decisions[Pass.SPECULAR] = (spec, f"Beckmann m = {material.roughness:g}, weight {material.specular:g}"
                              if spec else "material specular = 0")
@@ -659,18 +658,17 @@ def deposit_depth_decision(scene, target, nodes=None):
 LAST_LEG_VIEW_COSINE = 0.5   # the camera 60 degrees off the normal: where the planner weighs the last leg
 
 
-def last_leg_change(scene, *, first_bounce_apart: bool = False):
+def last_leg_change(scene):
     """(change, step, nearest): how much the exitance under the nearest point light (``nearest``
-    mm from the mesh) changes over the last leg's mean step ``step`` [mm, the longest channel's,
-    viewed at 60 degrees under a normal beam: :func:`jsss.diffusion.lateral_step.last_leg_step`].
+    mm from the mesh) changes over the last leg's mean step ``step`` [mm, every order's, the longest
+    channel's, viewed at 60 degrees under a normal beam: :func:`jsss.diffusion.lateral_step.last_leg_step`].
     Under a lamp at height h the irradiance falls by at most 3/(2h) per mm (at a distance h from
     the foot), so change = 1.5 step / nearest. (0, step, inf) without point lights; (0, 0, inf)
     without a homogeneous medium."""
     material = scene.material
     if material.medium is None:
         return 0.0, 0.0, np.inf
-    step = float(np.max(np.asarray(last_leg_step(material.medium, 1.0, LAST_LEG_VIEW_COSINE,
-                                                 first_bounce_apart=first_bounce_apart), float)))
+    step = float(np.max(np.asarray(last_leg_step(material.medium, 1.0, LAST_LEG_VIEW_COSINE), float)))
     points = [light for light in scene.lights if light.kind == "point"]
     if not points:
         return 0.0, step, np.inf
@@ -678,7 +676,7 @@ def last_leg_change(scene, *, first_bounce_apart: bool = False):
     return 1.5 * step / nearest, step, nearest
 
 
-def last_leg_decision(scene, target, nodes=None, *, method=None, first_bounce_apart: bool = False):
+def last_leg_decision(scene, target, nodes=None, *, method=None):
     """On when the exitance under the nearest point light changes over the last leg's mean step by a
     quarter of the target (:func:`last_leg_change`); texture space runs it (``method`` None: the
     physics alone, as the reference asks). Off for parameter maps: the step is one medium's."""
@@ -687,7 +685,7 @@ def last_leg_decision(scene, target, nodes=None, *, method=None, first_bounce_ap
         return False, f"needs a homogeneous medium; material is {material.kind}"
     if nodes is not None:
         return False, "parameter maps: the last leg's step is one medium's; read at the pixel"
-    change, step, nearest = last_leg_change(scene, first_bounce_apart=first_bounce_apart)
+    change, step, nearest = last_leg_change(scene)
     if np.isinf(nearest):
         return False, f"no point light: the light changes slowly over the last leg's {step:.2g} mm"
     on = bool(change >= target / 4)
