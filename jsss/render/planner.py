@@ -663,15 +663,13 @@ def last_leg_change(scene):
     mm from the mesh) changes over the last leg's mean step ``step`` [mm, every order's, the longest
     channel's, viewed at 60 degrees under a normal beam: :func:`jsss.diffusion.lateral_step.last_leg_step`].
     Under a lamp at height h the irradiance falls by at most 3/(2h) per mm (at a distance h from
-    the foot), so change = 1.5 step / nearest. (0, step, inf) without point lights; (0, 0, inf)
-    without a homogeneous medium."""
+    the foot), so change = 1.5 step / nearest. (0, 0, inf) without point lights or a homogeneous
+    medium (the step is not computed: it would be a JAX program at every start)."""
     material = scene.material
-    if material.medium is None:
+    points = [light for light in scene.lights if light.kind == "point"]
+    if material.medium is None or not points:
         return 0.0, 0.0, np.inf
     step = float(np.max(np.asarray(last_leg_step(material.medium, 1.0, LAST_LEG_VIEW_COSINE), float)))
-    points = [light for light in scene.lights if light.kind == "point"]
-    if not points:
-        return 0.0, step, np.inf
     nearest = min(distance_to_surface(scene.mesh, light.position) for light in points)
     return 1.5 * step / nearest, step, nearest
 
@@ -687,7 +685,7 @@ def last_leg_decision(scene, target, nodes=None, *, method=None):
         return False, "parameter maps: the last leg's step is one medium's; read at the pixel"
     change, step, nearest = last_leg_change(scene)
     if np.isinf(nearest):
-        return False, f"no point light: the light changes slowly over the last leg's {step:.2g} mm"
+        return False, "no point light: the light changes slowly over a transport mean free path"
     on = bool(change >= target / 4)
     why = (f"the light seen was last scattered up to {step:.2g} mm farther from the eye; under a lamp "
            f"{nearest:.0f} mm away that changes it by up to {100 * change:.1f} % "
