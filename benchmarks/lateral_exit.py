@@ -30,19 +30,18 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 import benchmarks.transport_truth as truth_tools  # enables float64
-from jsss.diffusion.lateral_step import first_leg_step, last_leg_step
+from jsss.diffusion.lateral_step import first_leg_step
 from jsss.render import load_scene
 from jsss.render.image_space import camera_buffers
 
 EDGE_MARGINS = (0, 3, 5, 10)  # mm inside the plane's edges
 
 
-def displaced(frame, buffers, scene, legs):
-    """``frame`` read elsewhere: each pixel's plane position moved, with ``"exit"`` in ``legs``, by
-    the mean last leg (away from the eye) and, with ``"entry"``, back along the first leg."""
+def displaced(frame, buffers, scene):
+    """``frame`` read where the light entered: each pixel's plane position moved back along the
+    mean first leg (:func:`jsss.diffusion.lateral_step.first_leg_step`)."""
     from scipy.interpolate import LinearNDInterpolator
 
-    medium = scene.material.medium
     where = buffers.position
 
     def unit(v):
@@ -51,23 +50,13 @@ def displaced(frame, buffers, scene, legs):
     to_eye = unit(np.asarray(scene.camera.position, float) - where)
     to_light = unit(np.asarray(scene.lights[0].position, float) - where)
     cos_exit, cos_light = np.clip(to_eye[..., 2], 0.0, 1.0), np.clip(to_light[..., 2], 0.0, 1.0)
-    last = np.asarray(last_leg_step(medium, cos_light, cos_exit))          # (H, W, C) mm, every order
-    first = np.asarray(first_leg_step(medium, cos_light, cos_exit))
-
-    def tangential_away(d):
-        t = -d[..., :2]
-        return t / np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
-
+    first = np.asarray(first_leg_step(scene.material.medium, cos_light, cos_exit))   # (H, W, C) mm
+    away_from_light = -to_light[..., :2] / np.maximum(np.linalg.norm(to_light[..., :2], axis=-1, keepdims=True), 1e-12)
     plane = where[..., :2]
     out = frame.copy()
     mask = buffers.mask
     for c in range(frame.shape[-1]):
-        shift = np.zeros_like(plane)
-        if "exit" in legs:
-            shift += last[..., c, None] * tangential_away(to_eye)
-        if "entry" in legs:
-            shift -= first[..., c, None] * tangential_away(to_light)
-        values = LinearNDInterpolator(plane[mask], frame[mask][:, c])(plane + shift)
+        values = LinearNDInterpolator(plane[mask], frame[mask][:, c])(plane - first[..., c, None] * away_from_light)
         out[..., c] = np.where(np.isfinite(values), values, frame[..., c])
     return out
 
@@ -114,7 +103,7 @@ def main(argv=None):
     ours = np.asarray(ours)
     without = np.asarray(truth_tools._ours(scene, None, off=("last leg",))[0])
     frames = {"as rendered": ours, "last leg off": without,
-              "as rendered, resampled at the first leg": displaced(ours, buffers, scene, ("entry",))}
+              "as rendered, resampled at the first leg": displaced(ours, buffers, scene)}
     print(f"# {args.scene}, index-matched, 80 x 60, Mitsuba {args.chunks} x {args.spp} spp; jsss default: "
           f"{plan.method} {plan.knob} ({passes}); {datetime.date.today()}\n")
     print("| jsss frame | pixels | inside the edges | RMS R / G / B | sums R / G / B |")

@@ -150,7 +150,6 @@ class ExitLaw(eqx.Module):
         ok = total > 0
         return jnp.where(ok, (weights * kernel).sum(-1) / jnp.where(ok, total, 1.0), flat)
 
-
     def _mixed(self, weights, shape):
         """The node weights a point's lobe is mixed with (:meth:`lobe`): uniform light's where
         ``weights`` is None, else ``weights`` plus ``UNLIT_SHARE`` of the frame's brightest

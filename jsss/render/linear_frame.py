@@ -145,15 +145,15 @@ def linear_frame(scene: Scene, plan: Plan, *, dtype=jnp.float64, blur_dtype=None
     params = render_params(scene, plan, dtype=dtype)
     low = render_params(scene, plan, dtype=blur_dtype)
     blurred = method.diffusion(low, prepared, method.irradiance(low, prepared))
-    images, at_pixels = [], []
+    textures = []
     for i in range(len(plan.variances)):  # exitance is linear in the weights: one image per variance, unit weight
         term = eqx.tree_at(lambda p: (p.weights, p.variances), low,
                            (jnp.ones((1, 3), blur_dtype), low.variances[i:i + 1]))
-        M = method.texel_exitance(term, prepared, blurred[i:i + 1])
-        # With the pass "last leg" each channel is read where its light was last scattered, the
-        # step held at the plan's medium (as the irradiance's laws are).
-        images.append(method.pixel_exitance(term, prepared, M).astype(dtype))
-        at_pixels.append(lookup(M, prepared.pixel_uv, prepared.texels.mask).astype(dtype))
+        textures.append(method.texel_exitance(term, prepared, blurred[i:i + 1]))
+    textures = jnp.stack(textures)
+    # With the pass "last leg" each channel is read where its light was last scattered, the step
+    # held at the plan's medium (as the irradiance's laws are); one step for every image.
+    images = method.pixel_exitance(low, prepared, textures).astype(dtype)
     unit = None  # single scattering at albedo 1: the geometry's factor alone
     if params.medium is not None:
         unit = Medium(jnp.zeros(3, dtype), jnp.ones(3, dtype), params.eta)
@@ -162,8 +162,9 @@ def linear_frame(scene: Scene, plan: Plan, *, dtype=jnp.float64, blur_dtype=None
     if single is not None and params.last_leg is not None and prepared.uv_per_mm is not None:
         # The first bounce moves with the exitance, by the ratio at the plan's weights (held, as the step)
         weights = params.weights.astype(dtype)
-        ratio = moved_ratio(jnp.einsum("nc,nhwc->hwc", weights, jnp.stack(images)),
-                            jnp.einsum("nc,nhwc->hwc", weights, jnp.stack(at_pixels)))
+        at_pixels = lookup(textures, prepared.pixel_uv, prepared.texels.mask).astype(dtype)
+        ratio = moved_ratio(jnp.einsum("nc,nhwc->hwc", weights, images),
+                            jnp.einsum("nc,nhwc->hwc", weights, at_pixels))
         single_radiance, single_exitance = single_radiance * ratio, single_exitance * ratio
     exit_parts = {}
     if params.exit_angle is not None:
@@ -173,7 +174,7 @@ def linear_frame(scene: Scene, plan: Plan, *, dtype=jnp.float64, blur_dtype=None
             "exit_weights": exit_weights(law, [g.astype(dtype) for g in shading.lights], params.radiant, params.eta),
             "cos_view": jnp.asarray((shading.normal * shading.view).sum(-1), dtype), "eta": params.eta,
             "first_bounce_apart": single is not None}
-    return LinearFrame(jnp.stack(images), jnp.asarray(plan.variances, dtype), lobe,
+    return LinearFrame(images, jnp.asarray(plan.variances, dtype), lobe,
                        jnp.asarray(prepared.shading.coverage, dtype), single_radiance, single_exitance, specular,
                        **exit_parts)
 

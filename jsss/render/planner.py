@@ -629,13 +629,12 @@ def deposit_change(scene, nodes=None):
     the nearest point light (``nearest`` mm from the mesh); (0, inf, depth) without point lights
     or a homogeneous medium."""
     material = scene.material
-    points = [light for light in scene.lights if light.kind == "point"]
-    if material.medium is None or not points:
+    nearest = _nearest_point_light(scene)
+    if material.medium is None or np.isinf(nearest):
         return 0.0, np.inf, 0.0
     depth = float(np.max(np.asarray(deposit_depth(material.medium), float)))
     if nodes is not None:
         depth = max(depth, float(np.max(np.asarray(deposit_depth(nodes), float))))
-    nearest = min(distance_to_surface(scene.mesh, light.position) for light in points)
     return float(point_light_loss(nearest, depth)), nearest, depth
 
 
@@ -665,13 +664,17 @@ def last_leg_change(scene):
     Under a lamp at height h the irradiance falls by at most 3/(2h) per mm (at a distance h from
     the foot), so change = 1.5 step / nearest. (0, 0, inf) without point lights or a homogeneous
     medium (the step is not computed: it would be a JAX program at every start)."""
-    material = scene.material
-    points = [light for light in scene.lights if light.kind == "point"]
-    if material.medium is None or not points:
+    nearest = _nearest_point_light(scene)
+    if scene.material.medium is None or np.isinf(nearest):
         return 0.0, 0.0, np.inf
-    step = float(np.max(np.asarray(last_leg_step(material.medium, 1.0, LAST_LEG_VIEW_COSINE), float)))
-    nearest = min(distance_to_surface(scene.mesh, light.position) for light in points)
+    step = float(np.max(np.asarray(last_leg_step(scene.material.medium, 1.0, LAST_LEG_VIEW_COSINE), float)))
     return 1.5 * step / nearest, step, nearest
+
+
+def _nearest_point_light(scene) -> float:
+    """Distance [mm] from the mesh to its nearest point light; inf without point lights."""
+    points = [light for light in scene.lights if light.kind == "point"]
+    return min((distance_to_surface(scene.mesh, light.position) for light in points), default=np.inf)
 
 
 def last_leg_decision(scene, target, nodes=None, *, method=None):
