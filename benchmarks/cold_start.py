@@ -6,12 +6,14 @@
 Each command is a fresh interpreter, ``python -m measure.commands.render`` (what the
 ``jsss-render`` script runs) and ``python -m measure.commands.fit_params``, in a temporary cache
 folder (``JSSS_CACHE_DIR``) that one untimed warm-up run of each command fills: XLA's compiled
-programs, the fits' traced programs, spectra and tables. What a second start still pays is
-importing Python modules and tracing and lowering the JAX programs (the persistent cache keeps
-only XLA's compile). The baseline is ``python -c "import jax"``, timed in the same rounds: the
-commands run interleaved with it, ``--repeats`` rounds, so that a shared machine's load falls
-on all alike. The ratio is the command's median wall time over the baseline's median; issue 35
-asks at most 3 for ``jsss-render examples/marble_sphere.toml``.
+programs, the stored executables of the renders and fits, spectra and tables. What a second
+start still pays is importing Python modules, loading the executables, and tracing and lowering
+whatever is not stored. Python writes its bytecode as a user's does (this machine's environment
+sets ``PYTHONDONTWRITEBYTECODE``, which would compile jsss's sources at every start). The
+baseline is ``python -c "import jax"``, timed in the same rounds: the commands run interleaved
+with it, ``--repeats`` rounds, so that a shared machine's load falls on all alike. The ratio is
+the command's median wall time over the baseline's median; issue 35 asks at most 3 for
+``jsss-render examples/marble_sphere.toml``.
 
 The import breakdown is ``python -X importtime`` of one more run of each command: the time
 spent importing, summed per top-level package (each module's own time, so nothing counts
@@ -55,7 +57,7 @@ def commands(out: Path) -> dict[str, list[str]]:
 def _environment(cache: Path) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items()
            if k not in ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "JSSS_CACHE_DIR",
-                        "JSSS_COMPILATION_CACHE", "PYTHONPATH")}
+                        "JSSS_COMPILATION_CACHE", "PYTHONPATH", "PYTHONDONTWRITEBYTECODE")}
     return env | {"JSSS_CACHE_DIR": str(cache)}
 
 

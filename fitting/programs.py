@@ -1,10 +1,10 @@
-"""Traced programs and Hankel grids kept across processes: :func:`reusable_program` and
+"""Compiled programs and Hankel grids kept across processes: :func:`reusable_program` and
 :func:`stored_hankel_grid`.
 
 XLA's persistent cache keeps compiled programs but not JAX's *tracing* of the Python that
 makes them, which for a fit (optimistix's solvers under ``vmap``) takes 4-6 s of every start.
-Functions decorated with :func:`reusable_program` are therefore kept traced, as serialized
-``jax.export`` programs under ``jsss-programs/`` (the store is :mod:`jsss.stored_programs`,
+Functions decorated with :func:`reusable_program` are therefore kept as XLA executables
+under ``jsss-programs/`` (the store is :mod:`jsss.stored_programs`,
 which the renderer uses too), and the Hankel grid of the fits (3 s of Bessel functions to
 build, 0.05 s to read) under ``jsss-grids/`` (:func:`stored_hankel_grid`), in the folder given
 to :func:`keep_programs_in`. Library code writes nothing of its own accord: until a caller

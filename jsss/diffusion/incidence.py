@@ -39,7 +39,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..medium import Medium
-from ..numerics import as_float_array, interpolate_rows, is_concrete, safe_sqrt
+from ..numerics import (
+    as_float_array,
+    device_array,
+    interpolate_rows,
+    is_concrete,
+    safe_sqrt,
+)
 
 __all__ = ["deposit_depth", "h_function", "h_function_numpy", "incidence_law", "incidence_ratio", "index_matched_brdf", "plane_albedo",
            "point_light_loss"]
@@ -195,7 +201,7 @@ def incidence_ratio(medium: Medium, cos_incident):
     op by op, JAX lowered some 40 small programs for them, 0.6 s of planning each new process.
     """
     if is_concrete((medium, cos_incident)):
-        return jnp.asarray(_incidence_ratio_numpy(medium, cos_incident))
+        return device_array(np.asarray(_incidence_ratio_numpy(medium, cos_incident)))
     return incidence_law(medium)(cos_incident)
 
 

@@ -201,7 +201,7 @@ def _single_and_diffuse_numpy(medium):
     :func:`jsss.fresnel.diffuse_fresnel_reflectance` and :func:`jsss.diffusion.dipole.total_reflectance`;
     ``tests/jsss/test_planner_numpy_paths.py`` holds them equal."""
     sigma_a, sigma_s_prime, eta = (np.asarray(x) for x in (medium.sigma_a, medium.sigma_s_prime, medium.eta))
-    dtype = np.result_type(np.asarray(as_float_array(1.0)).dtype, sigma_a, sigma_s_prime, eta)
+    dtype = np.result_type(jax.dtypes.canonicalize_dtype(np.float64), sigma_a, sigma_s_prime, eta)
     sigma_a, sigma_s_prime, eta = (x.astype(dtype) for x in (sigma_a, sigma_s_prime, eta))
     n = len(np.broadcast_shapes(sigma_a.shape, sigma_s_prime.shape, eta.shape))
 

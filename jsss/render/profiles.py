@@ -26,7 +26,7 @@ from .. import transport
 from ..diffusion import dipole
 from .. import layers as _layers
 from ..gaussians import GaussianSum, empirical_dipole_fit, evaluate, layers_as_gaussians, to_gaussian_sum
-from ..numerics import is_concrete
+from ..numerics import device_array, is_concrete
 from ..stored_programs import reusable_program
 from .kept import save_arrays
 from .scene import Material
@@ -235,8 +235,14 @@ def render_profile(material: Material, variances, *, radii=None, medium=None) ->
     -------
     GaussianSum with weights (n, 3).
     """
-    r = jnp.asarray(profile_radii(full_profile(material)) if radii is None else radii)
+    r = device_array(np.asarray(profile_radii(full_profile(material)))) if radii is None else jnp.asarray(radii)
     profile, total = _reference(material, r, medium)
+    if is_concrete((variances, profile, total)):
+        # NumPy's solve: the jitted one calls LAPACK, whose kernels jaxlib loads by importing
+        # SciPy's (0.25 s of a command's start, where the frame itself calls none)
+        weights, v, _ = _fit_weights(np.asarray(variances, r.dtype), np.asarray(r), np.asarray(profile),
+                                     np.asarray(total), xp=np)
+        return GaussianSum(device_array(weights), device_array(v))
     weights, v, _ = _fit_weights_jitted(variances, r, profile, total)
     return GaussianSum(weights, v)
 
@@ -296,7 +302,7 @@ def choose_variances(material: Material, target: float, *, max_terms: int = 12, 
     """
     full = full_profile(material)
     r = profile_radii(full)
-    reference = tuple(np.asarray(a, float) for a in _reference(material, jnp.asarray(r)))
+    reference = tuple(np.asarray(a, float) for a in _reference(material, device_array(r)))
     if material.gaussians is not None:  # the profile is given: use its own variances
         grid = np.asarray(full.variances)
         weights, _ = _numpy_fit(grid, r, reference)

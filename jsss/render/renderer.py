@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..medium import Medium
+from ..numerics import device_array, is_concrete
 from . import programs
 from .image_space import SampledProfile
 from .methods import PixelPrepared, TexturePrepared
@@ -108,7 +109,7 @@ def map_params(scene: Scene, plan: Plan, total, dtype) -> MapParams | None:
 
 def light_radiant(lights, dtype=jnp.float32):
     """(L, 3) each light's colour times its intensity, in ``dtype`` (:attr:`RenderParams.radiant`)."""
-    return jnp.asarray(np.array([np.asarray(light.color) * light.intensity for light in lights]), dtype)
+    return device_array(np.array([np.asarray(light.color) * light.intensity for light in lights], np.dtype(dtype)))
 
 
 _profiles: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # material -> {(variances, x64): GaussianSum}
@@ -139,14 +140,14 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
         gs = render_profile(scene.material, plan.variances, medium=medium, radii=radii)
     radiant = light_radiant(scene.lights, dtype)
     eta = scene.material.eta if medium is None else medium.eta
-    eta = jnp.broadcast_to(jnp.asarray(eta), (3,))
-    weights, variances = jnp.asarray(gs.weights, dtype), jnp.asarray(gs.variances, dtype)
+    eta = _in_dtype(np.broadcast_to(eta, (3,)), dtype) if is_concrete(eta) else jnp.broadcast_to(jnp.asarray(eta), (3,))
+    weights, variances = _in_dtype(gs.weights, dtype), _in_dtype(gs.variances, dtype)
     total = weights.sum(0)
     if scene.material.normalize_profile:  # d'Eon 2007 sec. 5.3: the colour map alone sets the colour
         weights = weights / total
     medium = scene.material.medium if medium is None else medium
     if medium is not None and scene.material.kind == "medium":
-        medium = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), medium)
+        medium = jax.tree_util.tree_map(lambda a: _in_dtype(a, dtype), medium)
     else:
         medium = None
     if medium is not None and scene.material.profile_model == "dipole" and not scene.material.normalize_profile:
@@ -161,6 +162,14 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
     last_leg = medium if medium is not None and plan.on(Pass.LAST_LEG) else None
     return RenderParams(weights, variances, radiant, eta.astype(dtype), profile, medium, oblique,
                         deposit, map_params(scene, plan, total, dtype), exit_angle, last_leg)
+
+
+def _in_dtype(value, dtype) -> jax.Array:
+    """``value`` as a ``dtype`` array; a concrete one is converted in NumPy (the same rounding),
+    where JAX would compile a conversion per shape at every start."""
+    if is_concrete(value):
+        return device_array(np.asarray(value, jax.dtypes.canonicalize_dtype(dtype)))
+    return jnp.asarray(value, dtype)
 
 
 def prepare(scene: Scene, plan: Plan, *, dtype=jnp.float32, timings: dict | None = None):
@@ -215,7 +224,7 @@ class FrameProgram:
         """The geometry's arrays as the program reads them."""
         x64 = bool(jax.config.jax_enable_x64)
         if x64 not in self._device:
-            self._device[x64] = tuple(jnp.asarray(a) for a in self._arrays)
+            self._device[x64] = tuple(device_array(np.asarray(a)) for a in self._arrays)
         return self._device[x64]
 
     def __call__(self, params: RenderParams):

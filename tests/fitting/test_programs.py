@@ -71,7 +71,6 @@ def test_a_reusable_program_is_traced_once_across_processes_and_a_damaged_file_i
     assert len(list((tmp_path / "jsss" / "xla" / "jsss-grids").iterdir())) == 1
     assert _run_program_script(tmp_path, "on") == (0, plain)
     # A truncated file is traced again and replaced, not an error.
-    size = stored[0].stat().st_size
     stored[0].write_bytes(stored[0].read_bytes()[:100])
     assert _run_program_script(tmp_path, "on") == (1, plain)
-    assert stored[0].stat().st_size == size
+    assert _run_program_script(tmp_path, "on") == (0, plain)  # replaced whole (XLA's bytes vary run to run)

@@ -1,5 +1,5 @@
 """jsss.stored_programs for programs made at run time (a render's frame) and for outputs that are
-jsss's own pytrees (a GaussianSum), which ``jax.export`` cannot serialize by itself.
+jsss's own pytrees (a GaussianSum), whose structure the stored executable does not hold.
 
 Run in subprocesses: the store is process state, which the test process must keep as it is
 (library code never turns it on). The fits' use of it is tested in tests/fitting/test_programs.py.
@@ -30,6 +30,10 @@ def make(scale):
     return stored_programs.stored_program(jax.jit(closure), name="closure", identity=repr(scale))
 
 
+if sys.argv[3:]:  # XLA's persistent cache in this folder, every program written to it
+    jax.config.update("jax_compilation_cache_dir", sys.argv[3])
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 if sys.argv[2] == "on":
     stored_programs.keep_programs_in(sys.argv[1])
 x = jnp.linspace(0.1, 1.0, 4)
@@ -42,8 +46,9 @@ print(len(traces), bool(jnp.array_equal(inside, two.weights)), *out)
 """
 
 
-def _run(tmp_path, mode):
-    out = subprocess.run([sys.executable, "-c", SCRIPT, str(tmp_path), mode], capture_output=True, text=True, check=False,
+def _run(tmp_path, mode, *xla_cache):
+    out = subprocess.run([sys.executable, "-c", SCRIPT, str(tmp_path), mode, *map(str, xla_cache)], capture_output=True,
+                         text=True, check=False,
                          env={"PATH": "", "HOME": str(tmp_path)}, timeout=300)
     assert out.returncode == 0, out.stderr
     traced, *rest = out.stdout.split()
@@ -66,3 +71,18 @@ def test_a_stored_closure_and_a_pytree_output_come_back_equal_without_tracing(tm
     damaged.write_bytes(damaged.read_bytes()[:50])
     assert _run(tmp_path, "on") == (2, plain)
     assert len(list(store.iterdir())) == 3
+
+
+def test_programs_compiled_from_a_filled_compilation_cache_are_stored_whole(tmp_path):
+    """XLA's CPU executables lose functions when serialized again after a load from XLA's
+    persistent cache ("Function ... not found" when run). A store filled in a process whose
+    compiles that cache serves (it was filled by a store elsewhere: a deleted or moved store
+    folder) must still give, in the next process, the same bits without tracing."""
+    xla = tmp_path / "xla"
+    _, plain = _run(tmp_path / "plain", "off")
+    assert _run(tmp_path / "first", "on", xla) == (3, plain)  # compiles the store's programs into XLA's cache
+    assert any(xla.iterdir())
+    store = tmp_path / "second"
+    assert _run(store, "on", xla) == (3, plain)  # XLA's cache serves these compiles; the store is filled
+    assert len(list((store / "jsss-programs").iterdir())) == 3
+    assert _run(store, "on", xla) == (1, plain)  # loaded and run: only the call under jit traces
