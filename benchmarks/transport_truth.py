@@ -49,6 +49,16 @@ from jsss.render.image_space import camera_buffers  # noqa: E402
 from jsss.render.reference import white_lambertian_radiance  # noqa: E402
 
 EXAMPLES = os.path.join(os.path.dirname(__file__), "..", "examples")
+CALIBRATION_SCENES = os.path.join(os.path.dirname(__file__), "calibration_scenes")  # the planner's other kinds
+
+
+def _scene_file(name: str) -> str:
+    """The TOML of ``name`` in examples/ or benchmarks/calibration_scenes/."""
+    for folder in (EXAMPLES, CALIBRATION_SCENES):
+        path = os.path.join(folder, f"{name}.toml")
+        if os.path.exists(path):
+            return path
+    raise SystemExit(f"--scenes: no {name}.toml in examples/ or benchmarks/calibration_scenes/")
 ROUGHNESS = (0.1, 0.2)
 
 
@@ -282,7 +292,8 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="40 x 30 pixels, 2 chunks")
     parser.add_argument("--spp", type=int, default=512, help="path-tracer samples per pixel per chunk")
-    parser.add_argument("--scenes", nargs="*", default=["marble_sphere", "ketchup_plane"])
+    parser.add_argument("--scenes", nargs="*", default=["marble_sphere", "ketchup_plane"],
+                        help="examples/ or benchmarks/calibration_scenes/ names")
     parser.add_argument("--profiles", nargs="*", default=["dipole", "transport"], choices=["dipole", "transport"],
                         help="jsss profile models to compare (the path tracer runs once for all); the first row "
                              "is always the scene as a user renders it: the planner's method, profile = auto")
@@ -315,7 +326,7 @@ def main(argv=None):
           f"{chunks} chunks x {args.spp} spp, {boundary}, {time.strftime('%Y-%m-%d')}")
     with tempfile.TemporaryDirectory() as folder:
         for name in args.scenes:
-            scene = _with_resolution(load_scene(os.path.join(EXAMPLES, f"{name}.toml")), width, height)
+            scene = _with_resolution(load_scene(_scene_file(name)), width, height)
             if args.index_matched:
                 scene = index_matched(scene)
             ply = _mesh_file(scene, folder)
