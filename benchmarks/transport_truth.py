@@ -16,7 +16,9 @@ chunks (seeds). Before any of that, a white Lambertian object is rendered by bot
 agree to 1 %), which proves that camera, image orientation and light units are the same.
 
 A plane is open; a medium needs a closed surface, so the plane becomes the top face of a
-box 30 mm deep (the lights see only its top; pixels are compared where jsss sees the plane).
+box 30 mm deep (pixels are compared where jsss sees the plane). A low light also enters the
+box's walls, which jsss's plane does not have: ``--black-walls`` hangs black curtains around
+them.
 
 Printed per scene, method, profile model (``--profiles dipole transport``: the dipole, and
 the scaled Monte Carlo tables of `jsss.transport`, exact to transport) and channel: the ratio
@@ -110,6 +112,30 @@ def _mesh_file(scene, folder):
     return path
 
 
+BLACK_WALLS = False  # --black-walls: black curtains keep the light off a plane's box walls
+
+
+def _wall_curtains(mi, scene):
+    """Black curtains 0.05 mm outside the four walls of a plane's box, up to 0.01 mm below its
+    top: the light reaches the medium only through the top, as it does jsss's open plane, and
+    light leaving through a wall is absorbed. Without them a low light enters the walls (the
+    grazing scene's far wall takes 2x the top's irradiance per mm^2) and shows near the edge."""
+    v = scene.mesh.vertices
+    (x0, y0, top), (x1, y1, _) = v.min(0), v.max(0)
+    depth, gap, below = 30.0, 0.05, 0.01
+    cz, hz = top - below - (depth - below) / 2, (depth - below) / 2
+    black = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
+    T = mi.ScalarTransform4f
+    walls = {}
+    for i, x in enumerate((x0 - gap, x1 + gap)):
+        walls[f"curtain_x{i}"] = {"type": "rectangle", "bsdf": black, "to_world": T().translate(
+            [float(x), float((y0 + y1) / 2), float(cz)]).rotate([0, 1, 0], 90).scale([hz, float((y1 - y0) / 2 + gap), 1])}
+    for i, y in enumerate((y0 - gap, y1 + gap)):
+        walls[f"curtain_y{i}"] = {"type": "rectangle", "bsdf": black, "to_world": T().translate(
+            [float((x0 + x1) / 2), float(y), float(cz)]).rotate([1, 0, 0], 90).scale([float((x1 - x0) / 2 + gap), hz, 1])}
+    return walls
+
+
 def _mitsuba_scene(mi, scene, ply, bsdf, interior=None):
     cam = scene.camera
     lights = {}
@@ -133,7 +159,8 @@ def _mitsuba_scene(mi, scene, ply, bsdf, interior=None):
                    "film": {"type": "hdrfilm", "width": cam.width, "height": cam.height,
                             "rfilter": {"type": "box"}, "pixel_format": "rgb"},
                    "sampler": {"type": "independent"}},
-        "object": shape, **lights})
+        "object": shape, **lights,
+        **(_wall_curtains(mi, scene) if BLACK_WALLS and np.ptp(scene.mesh.vertices[:, 2]) < 1e-9 else {})})
 
 
 def _render(mi, mscene, spp, seed):
@@ -304,9 +331,13 @@ def main(argv=None):
     parser.add_argument("--index-matched", action="store_true",
                         help="eta set to 1 on both sides: no rough-dielectric extrapolation, "
                              "far less path-tracer noise")
+    parser.add_argument("--black-walls", action="store_true",
+                        help="black curtains around a plane's box walls: light enters only through the top")
     parser.add_argument("--chandrasekhar", action="store_true",
                         help="only check the path tracer against Chandrasekhar's exact plane reflection")
     args = parser.parse_args(argv)
+    global BLACK_WALLS
+    BLACK_WALLS = args.black_walls
     mi = _mitsuba(args.variant)
     if args.chandrasekhar:
         print(f"Mitsuba {mi.__version__} {mi.variant()}: index-matched plane (albedo 0.747, 200 mm, 30 mm deep) under "
@@ -322,6 +353,7 @@ def main(argv=None):
     width, height, chunks = (40, 30, 2) if args.quick else (80, 60, 8)
     chunks = args.chunks or chunks
     boundary = "index-matched (null boundary)" if args.index_matched else f"roughness {ROUGHNESS} -> 0 (in alpha^2)"
+    boundary += ", a plane's box walls behind black curtains" if args.black_walls else ""
     print(f"transport truth: Mitsuba {mi.__version__} {mi.variant()} volpath, one grey medium per channel, {width}x{height}, "
           f"{chunks} chunks x {args.spp} spp, {boundary}, {time.strftime('%Y-%m-%d')}")
     with tempfile.TemporaryDirectory() as folder:
