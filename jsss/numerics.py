@@ -37,7 +37,7 @@ def is_concrete(value) -> bool:
 
 
 def device_array(value) -> jax.Array:
-    """A NumPy array or scalar, or a Python number, as a ``jnp`` array: what ``jnp.asarray``
+    """A NumPy array or scalar, or a Python number (not a list), as a ``jnp`` array: what ``jnp.asarray``
     gives (a copy, in JAX's canonical dtype, weakly typed for a Python number), without
     compiling a program.
 
@@ -46,7 +46,7 @@ def device_array(value) -> jax.Array:
     """
     try:
         return jax.device_put(value, may_alias=False)
-    except TypeError:  # a jax without may_alias (before 0.5)
+    except TypeError:  # a jax without device_put's may_alias
         return jnp.array(value)
 
 

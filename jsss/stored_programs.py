@@ -22,6 +22,7 @@ import os
 import pickle
 import platform
 import tempfile
+import threading
 import warnings
 from pathlib import Path
 
@@ -36,7 +37,7 @@ def keep_programs_in(where) -> None:
     in memory only, the default).
 
     The folder is made when the first file is written; one that cannot be written costs a
-    trace per start and a warning, nothing else.
+    trace and a compile per start and a warning, nothing else.
     """
     global _folder
     _folder = None if where is None else Path(where)
@@ -48,7 +49,7 @@ def folder() -> Path | None:
 
 
 def reusable_program(*, static_argnames=(), packages=("jsss",)):
-    """Decorate a jitted function so console scripts reuse its tracing across processes.
+    """Decorate a jitted function so console scripts reuse its compiled program across processes.
 
     Library behaviour is unchanged: until :func:`keep_programs_in` has named a folder, or when
     any argument is a tracer (the call is inside ``jit``, ``vmap`` or ``grad``), the function
@@ -81,7 +82,7 @@ def reusable_program(*, static_argnames=(), packages=("jsss",)):
 
 
 def stored_program(function, *, name: str, identity, packages=("jsss",)):
-    """``function`` (jitted, closing over what ``identity`` describes) kept traced like a
+    """``function`` (jitted, closing over what ``identity`` describes) kept compiled like a
     :func:`reusable_program`.
 
     For programs made at run time, such as a render's frame for one method configuration and
@@ -109,7 +110,7 @@ def _call(function, name, identity, packages, args, kwargs, static):
     from .numerics import device_array
 
     leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
-    if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
+    if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves) or _elsewhere(leaves):
         return function(*args, **kwargs, **static)
     leaves = [leaf if isinstance(leaf, jax.Array) else device_array(leaf) for leaf in leaves]
     signature = repr((identity, str(treedef), [(leaf.shape, leaf.dtype.name, leaf.weak_type) for leaf in leaves],
@@ -122,14 +123,28 @@ def _call(function, name, identity, packages, args, kwargs, static):
             program, out_tree = loaded
             try:  # the first run of a loaded executable is checked; see _compile_and_store
                 out = jax.block_until_ready(program(*leaves))
-            except jax.errors.JaxRuntimeError:
+            except (jax.errors.JaxRuntimeError, ValueError, TypeError):
                 path.unlink(missing_ok=True)
             else:
                 _loaded[key] = loaded
                 return jax.tree_util.tree_unflatten(out_tree, out)
-        _loaded[key] = _compile_and_store(path, function, static, treedef, leaves)
+        with _compiling:  # one store compile at a time: the cache bypass below is process state
+            _loaded[key] = _compile_and_store(path, function, static, treedef, leaves)
     program, out_tree = _loaded[key]
     return jax.tree_util.tree_unflatten(out_tree, program(*leaves))
+
+
+_compiling = threading.Lock()
+
+
+def _elsewhere(leaves) -> bool:
+    """Whether an argument is committed to a device other than the default one: a stored
+    executable runs only on the device it was compiled for, so such a call is the plain
+    function's."""
+    import jax
+
+    default = jax.devices()[0]
+    return any(isinstance(leaf, jax.Array) and leaf.committed and leaf.devices() != {default} for leaf in leaves)
 
 
 # The file: 4 bytes (little-endian length of the header), the header (pickled: the output with
@@ -191,14 +206,19 @@ def _compile_and_store(path: Path, function, static, treedef, leaves):
     hits = _cache_hits()
     program = lowered.compile()
     out_tree = trees[-1]
-    if _cache_hits() != hits:
-        with _without_compilation_cache():  # an option (XLA's default) that JAX's in-memory cache keys on
-            storable = lowered.compile(compiler_options={"xla_cpu_enable_fast_math": False})
-    else:
-        storable = program
-    calls_lapack = "lapack_" in lowered.as_text()
-    header = pickle.dumps((jax.tree_util.tree_unflatten(out_tree, [0] * out_tree.num_leaves), calls_lapack))
-    executable, _, _ = serialize_executable.serialize(storable)
+    try:  # a program that cannot be stored (a host callback, an option XLA lacks) runs unstored
+        if _cache_hits() != hits:
+            with _without_compilation_cache():  # an option (XLA's default) that JAX's in-memory cache keys on
+                storable = lowered.compile(compiler_options={"xla_cpu_enable_fast_math": False})
+        else:
+            storable = program
+        calls_lapack = "lapack_" in lowered.as_text()
+        header = pickle.dumps((jax.tree_util.tree_unflatten(out_tree, [0] * out_tree.num_leaves), calls_lapack))
+        executable, _, _ = serialize_executable.serialize(storable)
+    except Exception as error:  # noqa: BLE001
+        warnings.warn(f"{path.name}: the compiled program is not kept ({type(error).__name__}: {error})",
+                      stacklevel=4)
+        return program, out_tree
     write_atomically(path, len(header).to_bytes(4, "little") + header + hashlib.sha256(executable).digest()
                      + executable)
     return program, out_tree
@@ -261,13 +281,14 @@ def write_atomically(path: Path, data: bytes) -> None:
         with tempfile.NamedTemporaryFile(dir=path.parent, delete=False) as handle:
             handle.write(data)
         os.replace(handle.name, path)
-    except OSError as error:  # a read-only cache costs a trace per start, nothing else
+    except OSError as error:  # a read-only cache costs a trace and a compile per start, nothing else
         warnings.warn(f"{path}: cannot keep the compiled program there ({error})", stacklevel=4)
 
 
 @functools.cache
 def _fingerprint(packages: tuple) -> str:
-    """Versions, backend, float64 flag, processor and a hash of the sources whose programs are stored."""
+    """Versions, backend and device kind, float64 flag, processor, ``XLA_FLAGS`` and a hash of the
+    sources whose programs are stored: what a compiled executable depends on."""
     import jax
 
     versions = []
@@ -282,7 +303,9 @@ def _fingerprint(packages: tuple) -> str:
         for source in sorted((root / package).rglob("*.py")):
             digest.update(source.relative_to(root).as_posix().encode())
             digest.update(source.read_bytes())
-    return (f"{' '.join(versions)} {jax.default_backend()} x64={jax.config.jax_enable_x64} {_processor()} "
+    device = jax.devices()[0]
+    return (f"{' '.join(versions)} {jax.default_backend()} {getattr(device, 'device_kind', '?')} "
+            f"x64={jax.config.jax_enable_x64} {_processor()} XLA_FLAGS={os.environ.get('XLA_FLAGS', '')} "
             f"{digest.hexdigest()}")
 
 

@@ -239,10 +239,14 @@ def render_profile(material: Material, variances, *, radii=None, medium=None) ->
     profile, total = _reference(material, r, medium)
     if is_concrete((variances, profile, total)):
         # NumPy's solve: the jitted one calls LAPACK, whose kernels jaxlib loads by importing
-        # SciPy's (0.25 s of a command's start, where the frame itself calls none)
-        weights, v, _ = _fit_weights(np.asarray(variances, r.dtype), np.asarray(r), np.asarray(profile),
-                                     np.asarray(total), xp=np)
-        return GaussianSum(device_array(weights), device_array(v))
+        # SciPy's (0.25 s of a command's start, where the frame itself calls none). A singular
+        # system (equal variances) falls through to JAX's, which answers NaN as it always did.
+        try:
+            weights, v, _ = _fit_weights(np.asarray(variances, r.dtype), np.asarray(r), np.asarray(profile),
+                                         np.asarray(total), xp=np)
+            return GaussianSum(device_array(weights), device_array(v))
+        except np.linalg.LinAlgError:
+            pass
     weights, v, _ = _fit_weights_jitted(variances, r, profile, total)
     return GaussianSum(weights, v)
 

@@ -197,3 +197,24 @@ def test_auto_checks_a_parameter_maps_texels_not_only_its_base():
     uniform = built((("sigma_a", "marble.exr"),), a=np.broadcast_to(np.asarray(marble.sigma_a), sigma_a.shape))
     assert uniform.profile_model == "dipole" and "over the parameter map" in uniform.profile.why
     assert built((("diffuse_reflectance", "painted.exr"),)).profile_model == "dipole"
+
+
+def test_render_profile_with_numbers_is_the_traced_fit_and_a_singular_basis_stays_nan():
+    """With numbers the weights are solved in NumPy (no LAPACK program at a command's start):
+    equal to the jitted solve a fit traces, to float64 rounding; two equal variances make the
+    system singular, which gives NaN weights as the jitted solve does, not an exception."""
+    material = Material("marble", np.ones(3), medium=materials.jensen2001("marble"))
+    variances = np.array([0.01, 0.1, 1.0, 10.0])
+    concrete = render_profile(material, variances)
+    radii = concrete_radii(material)
+    traced = jax.jit(lambda medium: render_profile(material, variances, radii=radii, medium=medium).weights)(
+        material.medium)
+    np.testing.assert_allclose(np.asarray(concrete.weights), np.asarray(traced), rtol=1e-9, atol=1e-12)
+    singular = render_profile(material, np.array([0.1, 0.1, 1.0]))
+    assert np.isnan(np.asarray(singular.weights)).any() or np.isinf(np.asarray(singular.weights)).any()
+
+
+def concrete_radii(material):
+    from jsss.render.profiles import full_profile, profile_radii
+
+    return np.asarray(profile_radii(full_profile(material)))
