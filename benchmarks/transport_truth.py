@@ -311,7 +311,7 @@ def _ours(scene, method, samples=128, off=()):
     for name in off:
         plan = plan.replace(name, False, "benchmark: without it")
     passes = ", ".join(name for name in (Pass.SINGLE_SCATTERING, Pass.OBLIQUE_INCIDENCE, Pass.EXIT_ANGLE,
-                                         Pass.LAST_LEG, Pass.DEPOSIT_DEPTH) if plan.on(name))
+                                         Pass.FIRST_LEG, Pass.LAST_LEG, Pass.DEPOSIT_DEPTH) if plan.on(name))
     return render(scene, plan, dtype=jnp.float64).radiance, passes or "none", plan
 
 

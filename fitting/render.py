@@ -67,6 +67,7 @@ from jsss.render import (
     camera_buffers,
     deposit_change,
     distance_to_rim,
+    first_leg_change,
     last_leg_change,
     linear_frame,
     plan_scene,
@@ -846,7 +847,10 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
                 changed.append(f"deposit depth (irradiance under the lamp moved by {100 * moved:.2f} %)")
             if plan.on(Pass.LAST_LEG) and (moved := abs(last_leg_change(next_scene)[0]
                                                      - last_leg_change(fit_scene)[0])) > LAW_REPLAN:
-                changed.append(f"last leg (its change under the lamp moved by {100 * moved:.2f} %)")
+                changed.append(f"last leg (its change under the lamp or at the rim moved by {100 * moved:.2f} %)")
+            if plan.on(Pass.FIRST_LEG) and (moved := abs(first_leg_change(next_scene)[0]
+                                                      - first_leg_change(fit_scene)[0])) > LAW_REPLAN:
+                changed.append(f"first leg (its change under the lamp or at the rim moved by {100 * moved:.2f} %)")
         if not changed:
             break
         history.append(f"re-planned for the estimate after round {round_ + 1}: " + ", ".join(changed))

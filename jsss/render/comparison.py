@@ -92,6 +92,7 @@ def compare_methods(scene: Scene, name: str, *, reference: ReferenceFrame | None
         plan = plan.replace(Pass.EXIT_ANGLE, reference.exit_angle, "as the reference")
         if plan.method == Method.TEXTURE_SPACE:  # the one method that reads where the last leg began
             plan = plan.replace(Pass.LAST_LEG, reference.last_leg, "as the reference")
+            plan = plan.replace(Pass.FIRST_LEG, reference.first_leg, "as the reference")
         result = render(scene, plan, dtype=jnp.float32, time_passes=True, repeats=repeats)
         frame_ms = 1000 * sum(t for k, t in result.timings.items() if k not in _PREP)
         fixed_ms = _fixed_ms(scene, plan, repeats) if method != Method.TEXTURE_SPACE else 0.0

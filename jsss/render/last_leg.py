@@ -35,8 +35,8 @@ from .lighting import lookup
 from .raster import Raster
 from .shading import exit_weights
 
-__all__ = ["away_from_eye", "last_leg_steps", "moved_ratio", "shifted_lookup", "tabulated_steps",
-           "uv_per_mm_away_from_eye"]
+__all__ = ["away_from_eye", "last_leg_steps", "moved_lookup", "moved_ratio", "shifted_lookup", "tabulated_steps",
+           "uv_jacobians", "uv_per_mm_away_from_eye"]
 
 
 def away_from_eye(normal, view) -> np.ndarray:
@@ -49,12 +49,13 @@ def away_from_eye(normal, view) -> np.ndarray:
     return np.where(length > 1e-9, tangential / np.maximum(length, 1e-12), 0.0)
 
 
-def uv_per_mm_away_from_eye(vertices, faces, uvs, raster: Raster, normal, view) -> np.ndarray:
-    """How far the UV moves per mm walked along the surface away from the eye (H, W, 2) [1/mm].
+def uv_jacobians(vertices, faces, uvs, raster: Raster) -> np.ndarray:
+    """How far the UV moves per mm walked along the surface, per pixel (H, W, 2, 3) [1/mm]: a
+    tangent step :math:`t` [mm] moves the pixel's UV by ``J @ t``.
 
-    Per triangle, :math:`\\partial P/\\partial(u, v)` (3 x 2) from its corners; a tangent step
-    :math:`t` moves the UV by its least-squares preimage :math:`(J^TJ)^{-1}J^T t`. Zero where
-    no triangle covers the pixel or the triangle's UVs are degenerate. NumPy: geometry alone."""
+    Per triangle, :math:`\\partial P/\\partial(u, v)` (3 x 2) from its corners; ``J`` is its
+    least-squares preimage :math:`(J_P^TJ_P)^{-1}J_P^T`. Zero where no triangle covers the pixel
+    or the triangle's UVs are degenerate. NumPy: geometry alone."""
     vertices, faces, uvs = np.asarray(vertices, float), np.asarray(faces), np.asarray(uvs, float)
     corners, uv_corners = vertices[faces], uvs[faces]                          # (F, 3, 3), (F, 3, 2)
     edges = np.stack([corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]], -1)   # (F, 3, 2)
@@ -68,7 +69,13 @@ def uv_per_mm_away_from_eye(vertices, faces, uvs, raster: Raster, normal, view) 
     pinv = np.linalg.inv(np.where(gram_ok[:, None, None], gram, np.eye(2))) @ np.swapaxes(jacobian, 1, 2)  # (F, 2, 3)
     pinv = np.where(gram_ok[:, None, None], pinv, 0.0)
     face = np.where(raster.mask, raster.face, 0)
-    step = np.einsum("hwij,hwj->hwi", pinv[face], away_from_eye(normal, view))
+    return np.where(raster.mask[..., None, None], pinv[face], 0.0)
+
+
+def uv_per_mm_away_from_eye(vertices, faces, uvs, raster: Raster, normal, view) -> np.ndarray:
+    """How far the UV moves per mm walked along the surface away from the eye (H, W, 2) [1/mm]
+    (:func:`uv_jacobians` times :func:`away_from_eye`). NumPy: geometry alone."""
+    step = np.einsum("hwij,hwj->hwi", uv_jacobians(vertices, faces, uvs, raster), away_from_eye(normal, view))
     return np.where(raster.mask[..., None], step, 0.0)
 
 
@@ -111,8 +118,17 @@ def shifted_lookup(texture, pixel_uv, uv_per_mm, steps, mask):
     ``pixel_uv + steps[..., c] * uv_per_mm`` (bilinear, invalid texels left out as in
     :func:`jsss.render.lighting.lookup`); (..., H, W, C)."""
     dtype = texture.dtype
-    pixel_uv, uv_per_mm = jnp.asarray(pixel_uv, dtype), jnp.asarray(uv_per_mm, dtype)
-    channels = [lookup(texture[..., c:c + 1], pixel_uv + steps[..., c, None] * uv_per_mm, mask)
+    uv_per_mm = jnp.asarray(uv_per_mm, dtype)
+    return moved_lookup(texture, pixel_uv, steps[..., None] * uv_per_mm[..., None, :], mask)
+
+
+def moved_lookup(texture, pixel_uv, uv_moves, mask):
+    """The texture (..., S, S, C) read, channel by channel, at each pixel's UV plus that
+    channel's move ``uv_moves`` (H, W, C, 2) (bilinear, invalid texels left out as in
+    :func:`jsss.render.lighting.lookup`); (..., H, W, C)."""
+    dtype = texture.dtype
+    pixel_uv, uv_moves = jnp.asarray(pixel_uv, dtype), jnp.asarray(uv_moves, dtype)
+    channels = [lookup(texture[..., c:c + 1], pixel_uv + uv_moves[..., c, :], mask)
                 for c in range(texture.shape[-1])]
     return jnp.concatenate(channels, -1)
 

@@ -47,7 +47,6 @@ import jax.numpy as jnp
 from ..diffusion.exit_law import exit_law
 from ..medium import Medium
 from .last_leg import moved_ratio
-from .lighting import lookup
 from .methods import TextureSpace, camera_parts
 from .planner import Plan
 from .renderer import render_params
@@ -159,10 +158,10 @@ def linear_frame(scene: Scene, plan: Plan, *, dtype=jnp.float64, blur_dtype=None
         unit = Medium(jnp.zeros(3, dtype), jnp.ones(3, dtype), params.eta)
     lobe, single, specular = camera_parts(params, prepared.shading, dtype, medium=unit)
     single_radiance, single_exitance = (None, None) if single is None else single
-    if single is not None and params.last_leg is not None and prepared.uv_per_mm is not None:
+    if single is not None and method.moves_light(low, prepared):
         # The first bounce moves with the exitance, by the ratio at the plan's weights (held, as the step)
         weights = params.weights.astype(dtype)
-        at_pixels = lookup(textures, prepared.pixel_uv, prepared.texels.mask).astype(dtype)
+        at_pixels = method.pixel_lookup(prepared, textures).astype(dtype)
         ratio = moved_ratio(jnp.einsum("nc,nhwc->hwc", weights, images),
                             jnp.einsum("nc,nhwc->hwc", weights, at_pixels))
         single_radiance, single_exitance = single_radiance * ratio, single_exitance * ratio

@@ -53,6 +53,7 @@ class Pass(enum.StrEnum):
     SINGLE_SCATTERING = "single scattering"
     OBLIQUE_INCIDENCE = "oblique incidence"
     EXIT_ANGLE = "exit angle"
+    FIRST_LEG = "first leg"
     LAST_LEG = "last leg"
     DEPOSIT_DEPTH = "deposit depth"
     SPECULAR = "specular"

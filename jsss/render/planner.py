@@ -56,7 +56,7 @@ import numpy as np
 
 from ..diffusion.exit_law import lobe_change
 from ..diffusion.incidence import deposit_depth, incidence_ratio, point_light_loss
-from ..diffusion.lateral_step import last_leg_step
+from ..diffusion.lateral_step import first_leg_step, last_leg_step
 from ..diffusion.single_scattering import single_scattering_share
 from ..stored_programs import reusable_program
 from .calibration import (
@@ -437,6 +437,7 @@ def plan_scene(scene: Scene, *, accuracy: float | None = None, method: Method | 
     decisions[Pass.EXIT_ANGLE] = exit_angle_decision(material, target, nodes,
                                                      first_bounce_apart=decisions[Pass.SINGLE_SCATTERING][0])
     decisions[Pass.DEPOSIT_DEPTH] = deposit_depth_decision(scene, target, nodes)
+    decisions[Pass.FIRST_LEG] = first_leg_decision(scene, target, nodes, method=method)
     decisions[Pass.LAST_LEG] = last_leg_decision(scene, target, nodes, method=method)
     spec = material.specular > 0
     decisions[Pass.SPECULAR] = (spec, f"Beckmann m = {material.roughness:g}, weight {material.specular:g}"
@@ -635,7 +636,7 @@ def deposit_change(scene, nodes=None):
     nearest = _nearest_point_light(scene)
     if material.medium is None or np.isinf(nearest):
         return 0.0, np.inf, 0.0
-    loss, depth, _ = (float(x) for x in _under_a_lamp(material.medium, nodes, nearest))
+    loss, depth = (float(x) for x in _under_a_lamp(material.medium, nodes, nearest)[:2])
     return loss, nearest, depth
 
 
@@ -658,32 +659,59 @@ def deposit_depth_decision(scene, target, nodes=None):
 LAST_LEG_VIEW_COSINE = 0.5   # the camera 60 degrees off the normal: where the planner weighs the last leg
 
 
+FIRST_LEG_LIGHT_COSINE = 0.5  # light 60 degrees off the normal: where the planner weighs the first leg
+
+
 def last_leg_change(scene):
-    """(change, step, nearest): how much the exitance under the nearest point light (``nearest``
-    mm from the mesh) changes over the last leg's mean step ``step`` [mm, every order's, the longest
-    channel's, viewed at 60 degrees under a normal beam: :func:`jsss.diffusion.lateral_step.last_leg_step`].
-    Under a lamp at height h the irradiance falls by at most 3/(2h) per mm (at a distance h from
-    the foot), so change = 1.5 step / nearest. (0, 0, inf) without point lights or a homogeneous
-    medium (the step is not computed: it would be a JAX program at every start)."""
-    nearest = _nearest_point_light(scene)
-    if scene.material.medium is None or np.isinf(nearest):
+    """(change, step, nearest): how much the exitance changes over the last leg's mean step
+    ``step`` [mm, every order's, the longest channel's, viewed at 60 degrees under a normal beam:
+    :func:`jsss.diffusion.lateral_step.last_leg_step`], under the nearest point light (``nearest``
+    mm from the mesh) or at an open surface's rim (:func:`_leg_change`). (0, 0, inf) on a closed
+    surface without point lights or without a homogeneous medium (the step is not computed: it
+    would be a JAX program at every start)."""
+    return _leg_change(scene, last=True)
+
+
+def first_leg_change(scene):
+    """(change, step, nearest) of the light's first leg (:mod:`jsss.render.first_leg`), as
+    :func:`last_leg_change`: its mean step for light 60 degrees off the normal that leaves along
+    it (:func:`jsss.diffusion.lateral_step.first_leg_step`), at an open surface's rim under a
+    directional light (the pass moves parallel light only); ``nearest`` is inf."""
+    return _leg_change(scene, last=False)
+
+
+def _leg_change(scene, *, last: bool):
+    """Under a lamp at height h the irradiance falls by at most 3/(2h) per mm (at a distance h
+    from the foot): change = 1.5 step / nearest. At an open surface's rim the exitance falls
+    to about half over a diffusion length :math:`1/\\sigma_{tr}`: change = :math:`\\sigma_{tr}`
+    step, the largest channel's. The larger of the two."""
+    nearest = _nearest_point_light(scene) if last else np.inf
+    rim = not is_closed(scene.mesh) and (last or any(light.kind == "directional" for light in scene.lights))
+    if scene.material.medium is None or (np.isinf(nearest) and not rim):
         return 0.0, 0.0, np.inf
-    step = float(_under_a_lamp(scene.material.medium, None, nearest)[2])
-    return 1.5 * step / nearest, step, nearest
+    numbers = _under_a_lamp(scene.material.medium, None, nearest)
+    step, at_rim = (float(numbers[2]), float(numbers[3])) if last else (float(numbers[4]), float(numbers[5]))
+    change = max(1.5 * step / nearest, at_rim if rim else 0.0)
+    return change, step, nearest
 
 
 @reusable_program()
 @jax.jit
 def _under_a_lamp(medium, nodes, nearest):
-    """(irradiance lost at the deposit depth, that depth [mm], the last leg's step [mm]) under a
-    point light ``nearest`` mm away: the deepest and longest channel of ``medium`` (and of the
-    basis nodes' media ``nodes``, or None). One program kept across processes, not 45 eager
-    operations each compiled at a start (0.4 s of the ketchup plane's)."""
+    """(irradiance lost at the deposit depth, that depth [mm], the last leg's step [mm], its change
+    at a rim, the first leg's step [mm], its change at a rim) under a point light ``nearest`` mm
+    away: the deepest and longest channel of ``medium`` (and of the basis nodes' media ``nodes``,
+    or None). One program kept across processes, not 45 eager operations each compiled at a
+    start (0.4 s of the ketchup plane's)."""
     depth = jnp.max(deposit_depth(medium))
     if nodes is not None:
         depth = jnp.maximum(depth, jnp.max(deposit_depth(nodes)))
-    step = jnp.max(last_leg_step(medium, 1.0, LAST_LEG_VIEW_COSINE))
-    return point_light_loss(nearest, depth), depth, step
+    sigma_a, sigma_s = jnp.asarray(medium.sigma_a), jnp.asarray(medium.sigma_s_prime)
+    sigma_tr = jnp.sqrt(3 * sigma_a * (sigma_a + sigma_s))
+    last = last_leg_step(medium, 1.0, LAST_LEG_VIEW_COSINE)
+    first = first_leg_step(medium, FIRST_LEG_LIGHT_COSINE, 1.0)
+    return (point_light_loss(nearest, depth), depth, jnp.max(last), jnp.max(sigma_tr * last), jnp.max(first),
+            jnp.max(sigma_tr * first))
 
 
 def _nearest_point_light(scene) -> float:
@@ -692,25 +720,43 @@ def _nearest_point_light(scene) -> float:
     return min((distance_to_surface(scene.mesh, light.position) for light in points), default=np.inf)
 
 
-def last_leg_decision(scene, target, nodes=None, *, method=None):
-    """On when the exitance under the nearest point light changes over the last leg's mean step by a
-    quarter of the target (:func:`last_leg_change`); texture space runs it (``method`` None: the
-    physics alone, as the reference asks). Off for parameter maps: the step is one medium's."""
+def _leg_decision(scene, target, nodes, method, *, last: bool):
     material = scene.material
     if material.medium is None:
         return False, f"needs a homogeneous medium; material is {material.kind}"
     if nodes is not None:
-        return False, "parameter maps: the last leg's step is one medium's; read at the pixel"
-    change, step, nearest = last_leg_change(scene)
-    if np.isinf(nearest):
-        return False, "no point light: the light changes slowly over a transport mean free path"
+        return False, f"parameter maps: the {'last' if last else 'first'} leg's step is one medium's; read at the pixel"
+    change, step, nearest = _leg_change(scene, last=last)
+    if step == 0.0:
+        return False, ("no point light and no open rim: the light changes slowly over a transport mean free path"
+                       if last else "no open rim under a directional light (a point light's steps fan out: the "
+                       "pass moves parallel light only)")
     on = bool(change >= target / 4)
-    why = (f"the light seen was last scattered up to {step:.2g} mm farther from the eye; under a lamp "
-           f"{nearest:.0f} mm away that changes it by up to {100 * change:.1f} % "
+    where = f"under a lamp {nearest:.0f} mm away" if np.isfinite(nearest) else "at the open surface's rim"
+    if np.isfinite(nearest) and not is_closed(scene.mesh):
+        where += " or at the open surface's rim"
+    moved = ("the light seen was last scattered up to {:.2g} mm farther from the eye" if last
+             else "oblique light is first scattered up to {:.2g} mm farther along its way").format(step)
+    why = (f"{moved}; {where} that changes it by up to {100 * change:.1f} % "
            f"({'>=' if on else '<'} a quarter of the target, {100 * target / 4:.2g} %)")
     if on and method is not None and method != Method.TEXTURE_SPACE:
         return False, why + f"; texture space only, method is {method}"
     return on, why + ("; each channel is read there" if on else "")
+
+
+def last_leg_decision(scene, target, nodes=None, *, method=None):
+    """On when the exitance under the nearest point light, or at an open surface's rim, changes
+    over the last leg's mean step by a quarter of the target (:func:`last_leg_change`); texture
+    space runs it (``method`` None: the physics alone, as the reference asks). Off for parameter
+    maps: the step is one medium's."""
+    return _leg_decision(scene, target, nodes, method, last=True)
+
+
+def first_leg_decision(scene, target, nodes=None, *, method=None):
+    """On when the exitance at an open surface's rim under a directional light changes over the
+    first leg's mean step by a quarter of the target (:func:`first_leg_change`); texture space
+    runs it (``method`` None: the physics alone, as the reference asks)."""
+    return _leg_decision(scene, target, nodes, method, last=False)
 
 
 def _single_scattering_decision(material, target, nodes=None):

@@ -31,6 +31,7 @@ from numpy import trapezoid
 from ..diffusion.exit_law import exit_law
 from ..numerics import interpolate_rows
 from .environment import EnvironmentGeometry, environment_irradiance
+from .first_leg import FIRST_LEG_QUANTILE_COUNT, first_leg_moves, first_leg_quantiles
 from .image_space import camera_buffers
 from .last_leg import away_from_eye, last_leg_steps
 from .lighting import irradiance, light_geometry, shadow_map
@@ -69,7 +70,8 @@ class ReferenceFrame:
     ``profile``: what was integrated (``"dipole"``, ``"transport"``, ``"layers"``, ``"gaussians"``);
     ``exit_angle``: whether the exitance left by Chandrasekhar's exit law (else the flat lobe);
     ``last_leg``: whether each channel was integrated around the point its light was last
-    scattered under (:mod:`jsss.render.last_leg`)."""
+    scattered under (:mod:`jsss.render.last_leg`); ``first_leg``: and moved back toward the
+    light by its first leg (:mod:`jsss.render.first_leg`)."""
 
     radiance: np.ndarray
     mask: np.ndarray
@@ -79,6 +81,7 @@ class ReferenceFrame:
     profile: str = ""
     exit_angle: bool = False
     last_leg: bool = False
+    first_leg: bool = False
 
 
 def surface_samples(mesh, count: int, *, seed: int = 0):
@@ -138,7 +141,8 @@ def truth_material(material, profile_model: str | None = "transport"):
 
 def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, chunk: int = 128,
                        oblique: bool | None = None, profile_model: str | None = None,
-                       exit_angle: bool | None = None, last_leg: bool | None = None) -> ReferenceFrame:
+                       exit_angle: bool | None = None, last_leg: bool | None = None,
+                       first_leg: bool | None = None) -> ReferenceFrame:
     """The diffuse radiance of ``scene`` by brute-force surface integration (float64 if enabled).
 
     ``oblique``: scale the irradiance by the oblique-incidence law (:mod:`jsss.diffusion.incidence`);
@@ -150,6 +154,10 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     ``last_leg``: integrate each channel around the point its light toward the camera was last
     scattered under, the mean step of :mod:`jsss.render.last_leg` away from the eye; default:
     where the physics calls for it (:func:`jsss.render.planner.last_leg_decision`, whatever method).
+    ``first_leg``: move that point back toward each light by its first leg's mean step
+    (:mod:`jsss.render.first_leg`); default: where the physics calls for it
+    (:func:`jsss.render.planner.first_leg_decision`). A moved point off the surface (past an
+    open rim) gathers the light that diffuses out to it, its own irradiance none.
     ``profile_model``: ``None`` integrates the material's own profile; ``"transport"`` the
     transport tables' wherever they cover the medium (:func:`truth_material`), the truth the
     planner's calibration measures every method against, the frame's Gaussian fit of its own
@@ -158,6 +166,7 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     from .planner import (
         deposit_depth_decision,
         exit_angle_decision,
+        first_leg_decision,
         last_leg_decision,
         oblique_incidence_decision,
     )
@@ -171,6 +180,10 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     if last_leg is None:
         last_leg = last_leg_decision(scene, scene.accuracy)[0]
     last_leg = last_leg and material.medium is not None
+    if first_leg is None:
+        first_leg = first_leg_decision(scene, scene.accuracy)[0]
+    first_leg = first_leg and material.medium is not None
+    moved_points = last_leg or first_leg
     oblique_medium = material.medium if oblique and material.medium is not None else None
     deposit_medium = material.medium if material.medium is not None and deposit_depth_decision(
         scene, scene.accuracy)[0] else None
@@ -182,24 +195,29 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
                     for light, m in zip(scene.lights, maps)]
     E_pixel = np.array(irradiance(pixel_lights, radiant, eta, medium=oblique_medium, deposit=deposit_medium))
     centres = np.broadcast_to(buffers.position[..., None, :], buffers.position.shape[:-1] + (3, 3))  # per channel
-    if last_leg:  # each channel's point moved along the tangent plane, away from the eye, and lit there
-        medium = jax.tree_util.tree_map(jnp.asarray, material.medium)
+    medium = jax.tree_util.tree_map(jnp.asarray, material.medium) if moved_points else None
+    if last_leg:  # each channel's point moved along the tangent plane, away from the eye
         steps = np.asarray(last_leg_steps(medium, buffers.normal, buffers.view, pixel_lights, radiant, radiant.dtype,
                                           first_bounce_apart=False))            # (H, W, 3) mm
         centres = centres + steps[..., None] * away_from_eye(buffers.normal, buffers.view)[..., None, :]
-        for c in range(3):
-            moved = [light_geometry(centres[..., c, :], buffers.normal, buffers.mask, light, m)
-                     for light, m in zip(scene.lights, maps)]
-            E_pixel[..., c] = np.asarray(irradiance(moved, radiant, eta, medium=oblique_medium,
-                                                    deposit=deposit_medium))[..., c]
+    # and back toward the light, where the light it gathers was deposited from: the first leg's
+    # spread as its texture-space pass takes it, each quantile's point integrated over its own
+    # share of the samples (the cost of one point)
+    first_moves = np.asarray(first_leg_moves(medium, buffers.normal, buffers.view, pixel_lights, radiant, eta,
+                                             radiant.dtype)) if first_leg else 0.0   # (H, W, 3, 3) mm
+    quantiles = first_leg_quantiles(FIRST_LEG_QUANTILE_COUNT) if first_leg else np.zeros(1)
     position, normal, area = surface_samples(mesh, samples, seed=seed)
+    near = 3 * np.sqrt(area / samples)
+    if moved_points:
+        from scipy.spatial import cKDTree
+
+        surface = cKDTree(position)
     sample_lights = [light_geometry(position, normal, np.ones(len(position), bool), light, m)
                      for light, m in zip(scene.lights, maps)]
     E_samples = np.asarray(irradiance(sample_lights, radiant, eta, medium=oblique_medium, deposit=deposit_medium))
     lo, hi = mesh.bounds
     integrated, profile_name = truth_material(material, profile_model)
     r, table = _tabulated_profile(integrated, 2 * float(np.linalg.norm(hi - lo)))
-    near = 3 * np.sqrt(area / samples)
     inside = r <= near
     core = trapezoid(table[inside] * 2 * np.pi * r[inside, None], r[inside], axis=0)  # (3,)
     log_table = jnp.log(jnp.asarray(table[1:]))
@@ -211,17 +229,14 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
         x = jnp.clip((jnp.log(jnp.maximum(d, r[1])) - log_first) / log_step, 0.0, n - 1.0)
         return jnp.exp(interpolate_rows(x, log_table))
 
-    ys, Es = jnp.asarray(position), jnp.asarray(E_samples)
-    half = (samples + 1) // 2  # even-index points
-
     @jax.jit
-    def far_field(xs):
+    def far_field(xs, ys, Es):
         d = jnp.sqrt(jnp.sum((xs[:, None, :] - ys[None]) ** 2, -1))  # (P, N)
         contribution = jnp.where((d >= near)[..., None], profile(d) * Es[None], 0.0)
         return contribution[:, 0::2].sum(1), contribution[:, 1::2].sum(1)
 
     @jax.jit
-    def far_field_per_channel(xs):  # xs (P, C, 3): each channel about its own point
+    def far_field_per_channel(xs, ys, Es):  # xs (P, C, 3): each channel about its own point
         d = jnp.sqrt(jnp.sum((xs[:, None, :, :] - ys[None, :, None]) ** 2, -1))  # (P, N, C)
         x = jnp.clip((jnp.log(jnp.maximum(d, r[1])) - log_first) / log_step, 0.0, n - 1.0)
         low = jnp.minimum(jnp.floor(x).astype(jnp.int32), n - 2)
@@ -231,16 +246,31 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
         return contribution[:, 0::2].sum(1), contribution[:, 1::2].sum(1)
 
     visible = np.flatnonzero(buffers.mask.ravel())
-    points = (centres.reshape(-1, 3, 3) if last_leg else buffers.position.reshape(-1, 3))[visible]
-    integrate = far_field_per_channel if last_leg else far_field
-    first, second = [], []
-    for start in range(0, len(points), chunk):
-        a, b = integrate(jnp.asarray(points[start:start + chunk]))
-        first.append(np.asarray(a))
-        second.append(np.asarray(b))
-    first, second = np.concatenate(first), np.concatenate(second)
-    E_visible = E_pixel.reshape(-1, 3)[visible]
-    M_halves = [E_visible * core + area / half * first, E_visible * core + area / (samples - half) * second]
+    integrate = far_field_per_channel if moved_points else far_field
+    M_halves = [0.0, 0.0]
+    for k, q in enumerate(quantiles):
+        moved_centres = centres - q * first_moves
+        E_k = E_pixel.copy()
+        if moved_points:  # each channel lit at its point, none where that is off the surface
+            for c in range(3):
+                moved = [light_geometry(moved_centres[..., c, :], buffers.normal, buffers.mask, light, m)
+                         for light, m in zip(scene.lights, maps)]
+                E_k[..., c] = np.asarray(irradiance(moved, radiant, eta, medium=oblique_medium,
+                                                    deposit=deposit_medium))[..., c]
+            gap, _ = surface.query(moved_centres.reshape(-1, 3))
+            E_k = np.where(gap.reshape(E_k.shape) > near, 0.0, E_k)
+        points = (moved_centres.reshape(-1, 3, 3) if moved_points else buffers.position.reshape(-1, 3))[visible]
+        ys, Es = jnp.asarray(position[k::len(quantiles)]), jnp.asarray(E_samples[k::len(quantiles)])
+        half = (len(ys) + 1) // 2  # even-index points
+        first, second = [], []
+        for start in range(0, len(points), chunk):
+            a, b = integrate(jnp.asarray(points[start:start + chunk]), ys, Es)
+            first.append(np.asarray(a))
+            second.append(np.asarray(b))
+        first, second = np.concatenate(first), np.concatenate(second)
+        E_visible = E_k.reshape(-1, 3)[visible]
+        M_halves[0] = M_halves[0] + (E_visible * core + area / half * first) / len(quantiles)
+        M_halves[1] = M_halves[1] + (E_visible * core + area / (len(ys) - half) * second) / len(quantiles)
     M = 0.5 * (M_halves[0] + M_halves[1])
     noise = float(np.sqrt(np.mean((M_halves[0] - M_halves[1]) ** 2)) / 2 / np.sqrt(np.mean(M**2)))
     exitance = np.zeros((buffers.mask.size, 3))
@@ -255,4 +285,4 @@ def reference_radiance(scene: Scene, *, samples: int = 200_000, seed: int = 0, c
     else:
         L = np.asarray(diffuse_radiance(jnp.asarray(exitance), jnp.asarray(cos_view), eta)) * buffers.coverage[..., None]
     return ReferenceFrame(L, buffers.mask, noise, samples, float(near), profile_name, bool(exit_angle),
-                          bool(last_leg))
+                          bool(last_leg), bool(first_leg))

@@ -64,6 +64,8 @@ class RenderParams(eqx.Module):
         pass on; else the flat diffusion lobe (:func:`jsss.fresnel.exit_lobe`)
     last_leg : Medium or None, the medium whose last leg below the surface moves where the camera
         reads the exitance (:mod:`jsss.render.last_leg`), when the plan turns that pass on
+    first_leg : Medium or None, the medium whose first leg below the surface moves where the light
+        is deposited (:mod:`jsss.render.first_leg`), when the plan turns that pass on
     """
 
     weights: jax.Array
@@ -77,6 +79,7 @@ class RenderParams(eqx.Module):
     maps: MapParams | None = None
     exit_angle: Medium | None = None
     last_leg: Medium | None = None
+    first_leg: Medium | None = None
 
 
 def map_params(scene: Scene, plan: Plan, total, dtype) -> MapParams | None:
@@ -160,8 +163,9 @@ def render_params(scene: Scene, plan: Plan, *, medium=None, dtype=jnp.float32, r
     deposit = medium if medium is not None and plan.on(Pass.DEPOSIT_DEPTH) else None
     exit_angle = medium if medium is not None and plan.on(Pass.EXIT_ANGLE) else None
     last_leg = medium if medium is not None and plan.on(Pass.LAST_LEG) else None
+    first_leg = medium if medium is not None and plan.on(Pass.FIRST_LEG) else None
     return RenderParams(weights, variances, radiant, eta.astype(dtype), profile, medium, oblique,
-                        deposit, map_params(scene, plan, total, dtype), exit_angle, last_leg)
+                        deposit, map_params(scene, plan, total, dtype), exit_angle, last_leg, first_leg)
 
 
 def _in_dtype(value, dtype) -> jax.Array:

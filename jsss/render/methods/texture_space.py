@@ -27,10 +27,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..blur import blur_schedule, hierarchical_blur, uniform_stretch
+from ..first_leg import FIRST_LEG_QUANTILE_COUNT, first_leg_moves, first_leg_quantiles
 from ..last_leg import (
     last_leg_steps,
+    moved_lookup,
     moved_ratio,
-    shifted_lookup,
+    uv_jacobians,
     uv_per_mm_away_from_eye,
 )
 from ..lighting import lookup, translucent_transmission
@@ -54,6 +56,8 @@ from .base import (
 
 __all__ = ["TexturePrepared", "TextureSpace"]
 
+FIRST_LEG_QUANTILES = tuple(float(q) for q in first_leg_quantiles(FIRST_LEG_QUANTILE_COUNT))
+
 
 @dataclass(frozen=True, eq=False)
 class TexturePrepared(PreparedGeometry):
@@ -72,6 +76,11 @@ class TexturePrepared(PreparedGeometry):
         map (bilinearly) and parameter maps (the map texel it falls in) (:mod:`jsss.render.surface_maps`)
     uv_per_mm : (H, W, 2) or None, how far each pixel's UV moves per mm away from the eye, when the
         plan runs the pass "last leg" (:mod:`jsss.render.last_leg`)
+    uv_jacobian : (H, W, 2, 3) or None, how far each pixel's UV moves per mm along any tangent,
+        when the plan runs the pass "first leg" (:mod:`jsss.render.first_leg`)
+    margin_kept : bool, whether the blurred textures keep the open surface's margin, so that a
+        pixel near the rim whose light moved past it reads the light carried off there (the legs'
+        passes on an open surface without maps or translucency)
     """
 
     texels: TexelGeometry
@@ -86,6 +95,17 @@ class TexturePrepared(PreparedGeometry):
     colour_map: MapSampler | None = None
     coefficient_map: MapSampler | None = None
     uv_per_mm: np.ndarray | None = None
+    uv_jacobian: np.ndarray | None = None
+    margin_kept: bool = False
+
+    def texture_reading(self):
+        """``(scale, offset, mask)``: a texel UV ``uv`` is ``uv * scale + offset`` in the textures
+        the stages carry (with the margin kept, the padded ones) and ``mask`` their valid texels."""
+        mask, m = self.texels.mask, self.open_margin
+        if not self.margin_kept:
+            return 1.0, 0.0, mask
+        size = mask.shape[0]
+        return size / (size + 2 * m), m / (size + 2 * m), jnp.pad(jnp.asarray(mask), m, constant_values=True)
 
 
 def _stretch(texels: TexelGeometry, correct: bool):
@@ -172,14 +192,21 @@ class TextureSpace(RenderMethod):
             coefficient_map = kept("texel map sampler", (self.size, maps.sigma_a.shape[:2], texels.wrap_u, True),
                                    lambda: MapSampler.texels(self.size, maps.sigma_a.shape[:2], wrap_u=texels.wrap_u,
                                                              nearest=True))
-        uv_per_mm = None
+        uv_per_mm = uv_jacobian = None
+        mesh = scene.mesh
         if plan.on(Pass.LAST_LEG):
-            mesh = scene.mesh
             uv_per_mm = kept("camera uv per mm", (mesh_id, at_camera), lambda: uv_per_mm_away_from_eye(
                 mesh.vertices, mesh.faces, mesh.uvs, camera.raster, camera.normal, camera.view))
+        if plan.on(Pass.FIRST_LEG):
+            uv_jacobian = kept("camera uv jacobian", (mesh_id, at_camera),
+                               lambda: uv_jacobians(mesh.vertices, mesh.faces, mesh.uvs, camera.raster))
+        # Light that moved past an open surface's rim is read from the margin the blur carried it into
+        margin_kept = bool(margin and (uv_per_mm is not None or uv_jacobian is not None) and colour_map is None
+                           and coefficient_map is None and not plan.on(Pass.TRANSLUCENT_SHADOW_MAPS)
+                           and not texels.wrap_u)
         return TexturePrepared(texels, texel_lights, camera.mask, uv, pixel_shading(scene, plan, camera, pixel_lights),
                                stretch, schedule, plan.on(Pass.TRANSLUCENT_SHADOW_MAPS), margin, colour_map,
-                               coefficient_map, uv_per_mm)
+                               coefficient_map, uv_per_mm, uv_jacobian, margin_kept)
 
     @staticmethod
     def surface(params, prepared: TexturePrepared, dtype):
@@ -209,7 +236,8 @@ class TextureSpace(RenderMethod):
         past the rim is carried off into the margin and only what comes back counts, as in the
         exact surface integral M(x) = int_object R(|x - y|) E(y) dy (tested across a plane's
         rim against the closed form; on the ketchup plane it took texture space from +6 % to
-        within the path tracer's noise in red).
+        within the path tracer's noise in red). With ``prepared.margin_kept`` the margin stays
+        (n, S + 2m, S + 2m, C): a leg's step may read past the rim.
         """
         dtype = E.dtype
         if prepared.schedule is None:
@@ -227,7 +255,7 @@ class TextureSpace(RenderMethod):
                                    if a.ndim >= 2 else a, stretch)
         blurred = hierarchical_blur(E, mask, stretch, params.variances, prepared.schedule, taps=self.taps,
                                     wrap_u=wrap_u)
-        if m:
+        if m and not prepared.margin_kept:
             blurred = blurred[:, m:-m, :] if wrap_u else blurred[:, m:-m, m:-m]
         return blurred
 
@@ -257,26 +285,52 @@ class TextureSpace(RenderMethod):
     def camera(self, params, prepared: TexturePrepared, M):
         """Radiance (H, W, 3): the texel exitance looked up at each pixel, through the camera pass.
 
-        With the pass "last leg" each channel's subsurface light (diffusion and first bounce) is
-        read where it was last scattered: the exitance at the moved point, and the first bounce
-        scaled by the same ratio (:mod:`jsss.render.last_leg`)."""
-        exitance = lookup(M, prepared.pixel_uv, prepared.texels.mask)
-        if prepared.uv_per_mm is None or params.last_leg is None:
+        With the passes "last leg" and "first leg" each channel's subsurface light (diffusion and
+        first bounce) is read where its legs moved it: the exitance at the moved point, and the
+        first bounce scaled by the same ratio (:mod:`jsss.render.last_leg`,
+        :mod:`jsss.render.first_leg`)."""
+        exitance = self.pixel_lookup(prepared, M)
+        if not self.moves_light(params, prepared):
             return camera_radiance(exitance, params, prepared.shading)
         moved = self.pixel_exitance(params, prepared, M)
         return camera_radiance(moved, params, prepared.shading, single_scale=moved_ratio(moved, exitance))
 
     @staticmethod
-    def pixel_exitance(params, prepared: TexturePrepared, textures):
+    def moves_light(params, prepared: TexturePrepared) -> bool:
+        """Whether a leg's pass moves where the pixels read the exitance."""
+        return (prepared.uv_per_mm is not None and params.last_leg is not None) or \
+            (prepared.uv_jacobian is not None and params.first_leg is not None)
+
+    @staticmethod
+    def pixel_lookup(prepared: TexturePrepared, textures):
+        """The textures (..., S, S, C) the stages carry read at each pixel's UV (..., H, W, C)."""
+        scale, offset, mask = prepared.texture_reading()
+        return lookup(textures, jnp.asarray(prepared.pixel_uv, textures.dtype) * scale + offset, mask)
+
+    @classmethod
+    def pixel_exitance(cls, params, prepared: TexturePrepared, textures):
         """The texel exitance ``textures`` (..., S, S, C) read at each pixel (..., H, W, C): at its
-        UV, or with the pass "last leg" each channel at the mean step of its last leg (every
-        order's) farther from the eye (:mod:`jsss.render.last_leg`)."""
-        if prepared.uv_per_mm is None or params.last_leg is None:
-            return lookup(textures, prepared.pixel_uv, prepared.texels.mask)
-        shading = prepared.shading
-        steps = last_leg_steps(params.last_leg, shading.normal, shading.view, shading.lights, params.radiant,
-                               textures.dtype, first_bounce_apart=False)
-        return shifted_lookup(textures, prepared.pixel_uv, prepared.uv_per_mm, steps, prepared.texels.mask)
+        UV, or where the legs' passes move each channel's light: the mean step of its last leg
+        (every order's) farther from the eye (:mod:`jsss.render.last_leg`), and back toward the
+        light by its first leg's (:mod:`jsss.render.first_leg`)."""
+        if not cls.moves_light(params, prepared):
+            return cls.pixel_lookup(prepared, textures)
+        shading, dtype = prepared.shading, textures.dtype
+        moves = 0.0
+        if prepared.uv_per_mm is not None and params.last_leg is not None:
+            steps = last_leg_steps(params.last_leg, shading.normal, shading.view, shading.lights, params.radiant,
+                                   dtype, first_bounce_apart=False)
+            moves = steps[..., None] * jnp.asarray(prepared.uv_per_mm, dtype)[..., None, :]    # (H, W, C, 2)
+        scale, offset, mask = prepared.texture_reading()
+        pixel_uv = jnp.asarray(prepared.pixel_uv, dtype) * scale + offset
+        if prepared.uv_jacobian is None or params.first_leg is None:
+            return moved_lookup(textures, pixel_uv, moves * scale, mask)
+        first = first_leg_moves(params.first_leg, shading.normal, shading.view, shading.lights, params.radiant,
+                                params.eta.astype(dtype), dtype)                          # (H, W, C, 3) mm
+        first = jnp.einsum("hwij,hwcj->hwci", jnp.asarray(prepared.uv_jacobian, dtype), first)
+        # The first leg's length spreads as a free path's: the exitance is averaged over its quantiles
+        return sum(moved_lookup(textures, pixel_uv, (moves - q * first) * scale, mask)
+                   for q in FIRST_LEG_QUANTILES) / len(FIRST_LEG_QUANTILES)
 
     def exitance(self, params, prepared: TexturePrepared):
         """Exitance per texel (S, S, C) [W/mm^2]: irradiance, diffusion, weighted sum (and translucency)."""

@@ -22,7 +22,7 @@ FIN = scene_dict(geometry={"shape": "fin", "thickness": 1.0, "segments": 16},
                  camera={"position": [-100.0, 0.0, 0.0], "fov": 30, "resolution": [32, 32]},
                  render={"texture_size": 64, "accuracy": 0.05})
 EVERY_PASS = (Pass.DIFFUSION, Pass.TRANSLUCENT_SHADOW_MAPS, Pass.SINGLE_SCATTERING, Pass.OBLIQUE_INCIDENCE,
-              Pass.EXIT_ANGLE, Pass.LAST_LEG, Pass.DEPOSIT_DEPTH, Pass.SPECULAR)
+              Pass.EXIT_ANGLE, Pass.FIRST_LEG, Pass.LAST_LEG, Pass.DEPOSIT_DEPTH, Pass.SPECULAR)
 
 
 @pytest.fixture(scope="module")
@@ -83,10 +83,10 @@ def test_the_exit_lobe_follows_the_albedo(fin):
     """With the exit-angle pass the lobe is Chandrasekhar's at the albedo given, not the plan's:
     the frame of the plan's geometry at another medium (similarity albedo 0.95 / 0.92 / 0.83 ->
     0.75 / 0.6 / 0.5) is render()'s frame of that medium on the same plan (the laws the frame
-    holds, oblique incidence, deposit depth and the last leg, off on both sides)."""
+    holds, oblique incidence, deposit depth and the legs, off on both sides)."""
     scene, plan = fin
     plan = plan.replace(Pass.OBLIQUE_INCIDENCE, False, "test: held").replace(Pass.DEPOSIT_DEPTH, False, "test: held")
-    plan = plan.replace(Pass.LAST_LEG, False, "test: held")
+    plan = plan.replace(Pass.LAST_LEG, False, "test: held").replace(Pass.FIRST_LEG, False, "test: held")
     frame = linear_frame(scene, plan, dtype=jnp.float64)
     other = Medium(np.array([0.3, 0.6, 1.0]), np.array([0.9, 0.9, 1.0]), scene.material.medium.eta)
     moved = dataclasses.replace(scene, material=dataclasses.replace(scene.material, medium=other))
