@@ -35,8 +35,8 @@ under its lamp the pass took red from 2.5 to 3.8 % per pixel against Mitsuba, it
   the default frame within 0.1 of the walk's relative radiance in every 0.5 mm bin (0.07-0.08
   at 0.75-1.25 mm; 0.39 off without the pass);
 - ``benchmarks/calibration_scenes/ketchup_grazing.toml`` against Mitsuba
-  (``benchmarks/transport_truth.py --black-walls``): red 10.8 % per pixel with neither leg's
-  pass, 4 % with both.
+  (``benchmarks/lateral_exit.py --black-walls``): red 10.8 % per pixel with neither leg's
+  pass, 3.3 % with both (the path tracer's noise taken out).
 """
 
 from __future__ import annotations

@@ -32,8 +32,8 @@ from the stages of :class:`jsss.render.methods.TextureSpace`, the per-pixel part
 :meth:`LinearFrame.radiance` is that frame up to rounding (tested). Away from it, what
 depends on the medium besides the weights and the albedo is held at the plan's: the
 irradiance's oblique-incidence law and the depth at which point lights are read
-(:mod:`jsss.diffusion.incidence`), and the last leg's step and the first bounce's share of
-its move (:mod:`jsss.render.last_leg`); a fit (:func:`fitting.render.fit_render`) re-plans when
+(:mod:`jsss.diffusion.incidence`), and the legs' steps and the first bounce's share of
+their move (:mod:`jsss.render.last_leg`, :mod:`jsss.render.first_leg`); a fit (:func:`fitting.render.fit_render`) re-plans when
 those move. The exit law (:mod:`jsss.diffusion.exit_law`) depends on the albedo alone and
 follows it: :meth:`LinearFrame.radiance` recomputes the lobe from it.
 """

@@ -263,7 +263,8 @@ class TextureSpace(RenderMethod):
         """:math:`\\sum_i w_i B_i`, plus the translucent shadow maps' light when that pass runs (S, S, C) [W/mm^2];
         with parameter maps the basis profiles' weights on their own blurs, summed, and the light
         that crossed from one medium into another (:func:`jsss.render.surface_maps.crossing_light`);
-        through the colour map's layer on the way out."""
+        through the colour map's layer on the way out. With ``prepared.margin_kept``, (S + 2m, S + 2m, C)
+        as the blurs it is given."""
         dtype = blurred.dtype
         weights = params.weights
         if prepared.coefficient_map is not None:  # sum_k sum_i W_ki G_i * (a_k E): the entry point's profile
@@ -333,9 +334,11 @@ class TextureSpace(RenderMethod):
                    for q in FIRST_LEG_QUANTILES) / len(FIRST_LEG_QUANTILES)
 
     def exitance(self, params, prepared: TexturePrepared):
-        """Exitance per texel (S, S, C) [W/mm^2]: irradiance, diffusion, weighted sum (and translucency)."""
-        return self.texel_exitance(params, prepared,
-                                   self.diffusion(params, prepared, self.irradiance(params, prepared)))
+        """Exitance per texel (S, S, C) [W/mm^2]: irradiance, diffusion, weighted sum (and
+        translucency); a kept margin (``prepared.margin_kept``, the stages' own) cropped off."""
+        M = self.texel_exitance(params, prepared, self.diffusion(params, prepared, self.irradiance(params, prepared)))
+        m = prepared.open_margin if prepared.margin_kept else 0
+        return M[m:-m, m:-m] if m else M
 
     def stages(self, prepared: TexturePrepared):
         return (("irradiance", lambda params, _: self.irradiance(params, prepared)),

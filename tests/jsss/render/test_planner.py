@@ -206,7 +206,11 @@ def test_shipped_table_follows_the_measured_errors_of_a_front_lit_sphere():
     far = parse_scene(scene_dict(camera={"position": [0.0, -2200.0, 600.0], "fov": 28, "resolution": [96, 72]}))
     far_plan, near_plan = plan_scene(far, accuracy=0.05), plan_scene(near, accuracy=0.05)
     assert far_plan.blur_pixels < near_plan.blur_pixels / 10
-    assert far_plan.method == "lambert" and "marble_sphere" in next(e.basis for e in far_plan.estimates)
+    # There Lambert and texture space tie (2.6 and 2.5 % predicted, 3.1 and 3.0 ms in the fifth
+    # rerun of 2026-12-05, Lambert cheaper in the fourth): the cheapest predicted to meet 5 %.
+    chosen = next(e for e in far_plan.estimates if (e.method, e.knob) == (far_plan.method, far_plan.knob))
+    assert chosen.error <= 0.05 and all(e.error > 0.05 for e in far_plan.estimates if e.ms < chosen.ms)
+    assert "marble_sphere" in chosen.basis and far_plan.method in ("lambert", "texture-space")
     assert f"{far_plan.blur_pixels:.3g} pixels" in far_plan.describe() and "front-lit" in far_plan.describe()
 
 
