@@ -80,7 +80,8 @@ class TexturePrepared(PreparedGeometry):
         when the plan runs the pass "first leg" (:mod:`jsss.render.first_leg`)
     margin_kept : bool, whether the blurred textures keep the open surface's margin, so that a
         pixel near the rim whose light moved past it reads the light carried off there (the legs'
-        passes on an open surface without maps or translucency)
+        passes on an open surface without parameter maps or translucency; a colour map's exit
+        layer is the rim's there)
     """
 
     texels: TexelGeometry
@@ -201,7 +202,7 @@ class TextureSpace(RenderMethod):
             uv_jacobian = kept("camera uv jacobian", (mesh_id, at_camera),
                                lambda: uv_jacobians(mesh.vertices, mesh.faces, mesh.uvs, camera.raster))
         # Light that moved past an open surface's rim is read from the margin the blur carried it into
-        margin_kept = bool(margin and (uv_per_mm is not None or uv_jacobian is not None) and colour_map is None
+        margin_kept = bool(margin and (uv_per_mm is not None or uv_jacobian is not None)
                            and coefficient_map is None and not plan.on(Pass.TRANSLUCENT_SHADOW_MAPS)
                            and not texels.wrap_u)
         return TexturePrepared(texels, texel_lights, camera.mask, uv, pixel_shading(scene, plan, camera, pixel_lights),
@@ -276,6 +277,9 @@ class TextureSpace(RenderMethod):
             M = M + translucent_transmission(blurred, weights, params.variances, lights,
                                              jnp.asarray(prepared.texels.mask, dtype))
         _, exit_, coefficients = self.surface(params, prepared, dtype)
+        if prepared.margin_kept and exit_ is not None:  # the colour layer read past the rim: the rim's
+            m = prepared.open_margin
+            exit_ = jnp.pad(exit_, ((m, m), (m, m)) + ((0, 0),) * (exit_.ndim - 2), mode="edge")
         if prepared.coefficient_map is not None:
             M = M.reshape(M.shape[:-1] + (-1, 3)).sum(-2)
             if params.maps.crosses():  # light that enters one medium and leaves another
