@@ -13,7 +13,7 @@ Chandrasekhar's kernel for the light that arrives at the point
 derives it and tests it against an independent random walk). Where the exitance changes over
 a few transport mean free paths (under a near lamp, at a shadow's or a plane's edge) the
 camera sees that farther point's light: texture space looks each channel's exitance up
-:math:`\Delta_c` along the surface, away from the eye (:func:`shifted_lookup`), and scales the
+:math:`\Delta_c` along the surface, away from the eye (:func:`moved_lookup`), and scales the
 first bounce, computed at the pixel, by the same ratio (:func:`moved_ratio`): the step is that of
 every order, so the whole subsurface light moves. The brute-force reference integrates the profile around the
 shifted point (:func:`jsss.render.reference.reference_radiance`).
@@ -35,7 +35,7 @@ from .lighting import lookup
 from .raster import Raster
 from .shading import exit_weights
 
-__all__ = ["away_from_eye", "last_leg_steps", "moved_lookup", "moved_ratio", "shifted_lookup", "tabulated_steps",
+__all__ = ["away_from_eye", "last_leg_steps", "moved_lookup", "moved_ratio", "tabulated_steps",
            "uv_jacobians", "uv_per_mm_away_from_eye"]
 
 
@@ -111,15 +111,6 @@ def tabulated_steps(law, medium, cos_view, weights):
     depth = law.mixed_depth(mu, kernel, slope, weights)
     sigma_t = jnp.asarray(medium.sigma_a, dtype) + jnp.asarray(medium.sigma_s_prime, dtype)
     return safe_sqrt(jnp.maximum(1 - mu**2, 0.0)) / mu * depth / sigma_t
-
-
-def shifted_lookup(texture, pixel_uv, uv_per_mm, steps, mask):
-    """The texture (..., S, S, C) read at each pixel's UV moved by each channel's step:
-    ``pixel_uv + steps[..., c] * uv_per_mm`` (bilinear, invalid texels left out as in
-    :func:`jsss.render.lighting.lookup`); (..., H, W, C)."""
-    dtype = texture.dtype
-    uv_per_mm = jnp.asarray(uv_per_mm, dtype)
-    return moved_lookup(texture, pixel_uv, steps[..., None] * uv_per_mm[..., None, :], mask)
 
 
 def moved_lookup(texture, pixel_uv, uv_moves, mask):
