@@ -71,6 +71,13 @@ def _by_radius(image, pixel_mm, eta, g, grid):
     return out
 
 
+def _early(info) -> str:
+    if "early_photons" not in info:
+        return "no early part"
+    return (f"{int(info['early_photons']):.1e} more for the paths up to {float(info['early_max_path']):g} transport "
+            "lengths, first flights importance-sampled toward the surface")
+
+
 def _rms(x):
     x = np.asarray(x, float)
     return float(np.sqrt(np.mean(x**2)))
@@ -127,8 +134,8 @@ def main():
         f"absorption in the walk, {args.photons:.1e} photons each, seeds 100-{99 + n_truths}; not the tables), one "
         "channel, transport length 1 mm, camera cone 20.7 degrees, 256 px framing 4 diffusion lengths each side, "
         "beam one pixel wide. Fits: `fit_measurement` defaults, `model=\"transport\"`, radiance at 0 degrees. "
-        f"Tables: {int(info['photons']):.1e} photons per (eta, g), `jsss/data/transport_tables.npz` "
-        f"{size_mb:.1f} MB.",
+        f"Tables: {int(info['photons']):.1e} photons per (eta, g), and {_early(info)}, "
+        f"`jsss/data/transport_tables.npz` {size_mb:.1f} MB.",
         "",
         "Per parameter: relative error of the estimate | stated error (relative) | the tables' share of it "
         "(relative, in quadrature) | z with the table term | z without it (data and calibration only). "
@@ -169,9 +176,9 @@ def main():
         "(eta, g) (at 20 minutes per 5e5 on 2 cores, about 5 h per (eta, g), 150 h for all 28; a walk cannot "
         "aim its photons at the exit-angle bin or the radii a camera's fit reads, so every cell gains alike). "
         f"The file's size does not grow with photons (float32 cell means on a fixed grid): {size_mb:.1f} MB. Most of sigma_s' table error "
-        "comes from rho' < 1 (the table above): cells of short paths, which a second walk capped at a few tens "
-        "of transport lengths could fill with many more photons at little cost, its tally joined to the full "
-        "walk's beyond the cap (a split by path length; not built).",
+        "comes from rho' < 1 (the table above): cells of short paths. Those are now filled by a second walk "
+        f"({_early(info)}; about a minute per (eta, g)), its tally joined to the full walk's beyond the cap "
+        "(a split by path length, `scripts/generate_transport_tables.py`).",
         "",
         "The truths share six (eta, g) tables, and truths of one (eta, g) read the same cells, so their table "
         "errors are correlated: a lean common to many truths (the mean z above) is what one shared table error "

@@ -59,8 +59,9 @@ def reusable_program(*, static_argnames=(), packages=("jsss",)):
 
     The key also holds the versions of jax, jaxlib, equinox, lineax and optimistix, the
     backend, the float64 flag, the processor (an executable is compiled for its instruction
-    set) and a hash of the sources of ``packages`` and of the function's own package, so a
-    stored program is never run by code, or on a machine, other than the one that compiled it.
+    set) and a hash of the sources and data files (``.npz``, ``.json``) of ``packages`` and of
+    the function's own package, so a stored program is never run by code, with tables, or on a
+    machine, other than the one that compiled it.
     A file that fails to load, or whose first run fails, is compiled again and replaced.
     """
 
@@ -288,7 +289,8 @@ def write_atomically(path: Path, data: bytes) -> None:
 @functools.cache
 def _fingerprint(packages: tuple) -> str:
     """Versions, backend and device kind, float64 flag, processor, ``XLA_FLAGS`` and a hash of the
-    sources whose programs are stored: what a compiled executable depends on."""
+    sources and data files (tables, calibration) whose programs are stored: what a compiled
+    executable depends on."""
     import jax
 
     versions = []
@@ -300,7 +302,9 @@ def _fingerprint(packages: tuple) -> str:
     digest = hashlib.sha256()
     root = Path(__file__).resolve().parent.parent
     for package in packages:
-        for source in sorted((root / package).rglob("*.py")):
+        # The data files too: a program holds the tables it was traced with as constants.
+        sources = [path for pattern in ("*.py", "*.npz", "*.json") for path in (root / package).rglob(pattern)]
+        for source in sorted(sources):
             digest.update(source.relative_to(root).as_posix().encode())
             digest.update(source.read_bytes())
     device = jax.devices()[0]

@@ -13,7 +13,10 @@ each write a part (``--out part.npz --etas 1.0,1.1 --seeds 1``); ``--merge`` joi
 other etas, and ``--average`` parts of the same etas from other seeds (weighted by their
 photons). The shipped tables: ``--photons 500000 --seeds 0,1`` (two independent runs of
 500 000 photons), then ``--average`` of that file with ``--seeds 2`` and ``--seeds 3``:
-2 x 10^6 photons per (eta, g).
+2 x 10^6 photons per (eta, g); then ``--early 10000000 --tables FULL.npz`` (about 28 minutes
+on 2 cores): 10^7 more photons per (eta, g) for the paths up to 4 transport lengths, which set
+the light of a low albedo (see ``add_early``). ``--walked EARLIER.npz`` blends an earlier
+run's early walks again (minutes).
 """
 
 from __future__ import annotations
@@ -26,17 +29,144 @@ from pathlib import Path
 import jax
 
 jax.config.update("jax_enable_x64", True)
+import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jsss import Medium  # noqa: E402
 from jsss.transport.montecarlo import _params  # noqa: E402
 from jsss.transport.photon_walk import run_walk  # noqa: E402
-from jsss.transport.tables import TableGrid, tabulate  # noqa: E402
+from jsss.transport.tables import TableGrid, tabulate, tail_total_closed_form  # noqa: E402
 
 ETAS = (1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6)
 GS = (0.0, 0.5, 0.8, 0.9)
 MAX_PATH = 1000.0  # transport lengths
+EARLY_MAX_PATH = 4.0  # transport lengths: e^{-4a'} leaves the early part all of the light at a' >= 3
+EARLY_RUN = 500_000  # photons per early walk (one seed each)
+# The early walks' first flight: half at the medium's own rate, the rest 10, 100 and 1000 times
+# faster, so that the short paths of a strongly absorbing medium (a' up to 10^3) are well sampled.
+FIRST_FLIGHT_RATES = (1.0, 1.0, 1.0, 10.0, 100.0, 1000.0)
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "jsss" / "data" / "transport_tables.npz"
+
+
+def _table_seed(seed, eta, j):
+    return seed * 1000 + int(round(eta * 100)) * 10 + j
+
+
+def _early_seed(run, eta, j):
+    """Seeds of the early walks: far from the full walks' (``_table_seed`` of seeds 0-3 is below
+    5000) and from the tests' and benchmarks' truths (below 10^6), so no stream is shared."""
+    return 7_000_000 + run * 10_000 + int(round(eta * 100)) * 10 + j
+
+
+def _walk(eta, g, *, photons, seed, max_path, lanes=4096, progress=False, label="", first_flight_rates=None):
+    # sigma_s = 1/(1-g) per transport length: every length below is in units of 1/sigma_s'.
+    params = _params([Medium(0.0, 1.0, eta)], [np.inf], g=g, eta_above=1 / eta, eta_below=1 / eta, relative=True)
+    if first_flight_rates is not None:  # the start cosine (1: along the normal), then the rates
+        params = params + (jnp.asarray(1.0, params[0].dtype), jnp.asarray(first_flight_rates, params[0].dtype))
+    return run_walk(params, n_photons=photons, lanes=lanes, max_steps=2**31 - 1, max_path=max_path, seed=seed,
+                    progress=progress, label=label)
+
+
+def _early_tables(eta, g, seeds, photons_each, *, max_path, grid, first_flight_rates=None):
+    """The mean of short walks' tables (paths up to ``max_path`` only, no tail), one per seed:
+    cells, their second moments (``tabulate``'s ``second``), totals and the totals' errors."""
+    parts = []
+    for seed in seeds:
+        records = _walk(eta, g, photons=photons_each, seed=seed, max_path=max_path,
+                        first_flight_rates=first_flight_rates)
+        parts.append(tabulate(records.radius, records.path, records.exit_cos, records.side == 1, records.side == 0,
+                              grid=grid, max_path=max_path, model_tail=False, weight=records.weight))
+    cells = np.mean([p["exitance"] for p in parts], axis=0)
+    second = np.mean([p["second"] for p in parts], axis=0)
+    total = np.mean([p["total"] for p in parts], axis=0)
+    error = np.sqrt(np.sum([p["error_total"] ** 2 for p in parts], axis=0)) / len(parts)
+    return cells, second, total, error
+
+
+def add_early(tables, *, photons, max_path=EARLY_MAX_PATH, progress=True, walked=None):
+    r"""Join an early part of ``photons`` photons per (eta, g) to full tables: their short paths, many times over.
+
+    A low albedo's light is the paths of a few transport lengths, and the full walks' 2 x 10^6
+    photons hold too few of them: their totals at reduced albedo 0.02-0.1 were up to 2 % off
+    adding-doubling at g = 0, 1.8-2.5 of their standard errors (issue 37). Every path up to
+    ``max_path`` is cheap to walk. A shipped cell S is two tallies of disjoint sets of the full
+    walk's photons, S = late + own: ``own`` the paths that left before the cap (the walk is
+    counter-based, so rerunning the shipped seeds capped at ``max_path`` reproduces exactly those
+    photons; checked: at the largest absorption, where only short paths count, the remainder
+    must vanish) and ``late`` the rest. A new walk of ``photons`` photons on other seeds, whose
+    first flight is importance-sampled (``FIRST_FLIGHT_RATES``: at a' = 48 only a photon first
+    scattered within 0.01 transport lengths of the surface counts, one in a hundred of a plain
+    walk's), estimates the same early part again as ``new``. Each cell becomes
+
+        T = late + w new + (1 - w) own = S + w (new - own),
+
+    unbiased for any w. Per absorption node, w minimises the total's variance,
+    w = Cov(S, own) / (Var(own) + Var(new)) with Cov(S, own) = Var(own) - E[late] E[own] / N
+    (a photon is late or early, never both): at a' = 0, w = 0, so a medium that absorbs nothing
+    still returns exactly all light (late + own is every photon); at a low albedo, w -> 1.
+    The file keeps the parts (``early_exitance`` = new, ``early_second``: new's second moments,
+    which the identity with the cell at 2a' no longer gives under weights; ``own_exitance``,
+    ``early_weight`` = w; the totals' ``early_total``, ``early_error_total``, ``own_total``) so
+    that the noise of each follows from the tables (:func:`jsss.transport.profiles.split_relative_variance`).
+
+    ``walked``: the new walk's parts from an earlier run's file (its ``early_*`` arrays, same
+    grids, etas and g), to blend again without walking them again.
+    """
+    if "early_photons" in tables:
+        raise SystemExit("these tables already hold an early part; build the full tables again first")
+    grid = TableGrid()
+    seeds = [int(s) for s in np.atleast_1d(tables["seed"])]
+    full = int(tables["photons"])
+    runs = max(1, int(round(photons / EARLY_RUN)))
+    if walked is not None:
+        runs = int(walked["early_photons"]) // EARLY_RUN
+    out = dict(tables)
+    exitance = tables["exitance"].astype(np.float64)
+    total, error = tables["total"].copy(), tables["error_total"].copy()
+    early_exitance, early_second, own_exitance = (np.zeros_like(exitance) for _ in range(3))
+    early_total, early_error, own_total, weight = (np.zeros_like(total) for _ in range(4))
+    tail_per_constant = tail_total_closed_form(grid.absorption, float(tables["max_path"]))
+    for i, eta in enumerate(tables["etas"]):
+        for j, g in enumerate(tables["gs"]):
+            start = time.perf_counter()
+            own, _, own_sum, own_error = _early_tables(eta, g, [_table_seed(s, eta, j) for s in seeds],
+                                                       full // len(seeds), max_path=max_path, grid=grid)
+            late_total = total[i, j] - own_sum
+            if abs(late_total[-1]) > 1e-5 * total[i, j, -1]:
+                raise SystemExit(f"eta {eta} g {g}: the shipped photons' short paths did not reproduce (at a' = "
+                                 f"{grid.absorption[-1]:g} the remainder is {late_total[-1] / total[i, j, -1]:.2e} of "
+                                 "the total); the tables were built on another platform or version")
+            if walked is None:
+                new, new_second, new_total, new_error = _early_tables(
+                    eta, g, [_early_seed(k, eta, j) for k in range(runs)], EARLY_RUN, max_path=max_path, grid=grid,
+                    first_flight_rates=FIRST_FLIGHT_RATES)
+            else:
+                new, new_second, new_total, new_error = (np.asarray(walked[key][i, j], np.float64) for key in (
+                    "early_exitance", "early_second", "early_total", "early_error_total"))
+            # The late tally's own mean: the modelled tail beyond the full walks' cap is no tally.
+            tail = float(tables["tail_mass"][i, j]) * np.sqrt(float(tables["max_path"])) / 2 * tail_per_constant
+            late_tallied = np.maximum(late_total - tail, 0.0)
+            covariance = own_error**2 - late_tallied * own_sum / full                 # Cov(S, own)
+            w = np.clip(covariance / np.maximum(own_error**2 + new_error**2, 1e-300), 0.0, 1.0)
+            w[grid.absorption == 0] = 0.0
+            exitance[i, j] = np.maximum(exitance[i, j] + w[None, :, None] * (new - own), 0.0)
+            total[i, j] = total[i, j] + w * (new_total - own_sum)
+            error[i, j] = np.sqrt(np.maximum(error[i, j] ** 2 - 2 * w * covariance
+                                             + w**2 * (own_error**2 + new_error**2), 0.0))
+            early_exitance[i, j], early_second[i, j], own_exitance[i, j] = new, new_second, own
+            early_total[i, j], early_error[i, j], own_total[i, j], weight[i, j] = new_total, new_error, own_sum, w
+            if progress:
+                k = np.searchsorted(grid.absorption, 40.0)
+                print(f"eta {eta} g {g}: early {runs * EARLY_RUN:.1e} photons, total at a' = {grid.absorption[k]:.3g} "
+                      f"{tables['total'][i, j, k]:.6f} +- {tables['error_total'][i, j, k]:.1e} -> {total[i, j, k]:.6f} "
+                      f"+- {error[i, j, k]:.1e} (w {w[k]:.3f}), {time.perf_counter() - start:.0f} s", file=sys.stderr,
+                      flush=True)
+    out.update(exitance=exitance.astype(np.float32), total=total, error_total=error,
+               early_exitance=early_exitance.astype(np.float32), early_second=early_second.astype(np.float32),
+               own_exitance=own_exitance.astype(np.float32), early_weight=weight, early_total=early_total,
+               early_error_total=early_error, own_total=own_total, early_photons=np.int64(runs * EARLY_RUN),
+               early_max_path=np.float64(max_path), early_first_flight_rates=np.asarray(FIRST_FLIGHT_RATES))
+    return out
 
 
 def build(etas, gs, *, photons, seed, max_path=MAX_PATH, lanes=4096, progress=True):
@@ -48,12 +178,8 @@ def build(etas, gs, *, photons, seed, max_path=MAX_PATH, lanes=4096, progress=Tr
     for i, eta in enumerate(etas):
         for j, g in enumerate(gs):
             start = time.perf_counter()
-            # sigma_s = 1/(1-g) per transport length: every length below is in units of 1/sigma_s'.
-            params = _params([Medium(0.0, 1.0, eta)], [np.inf], g=g, eta_above=1 / eta, eta_below=1 / eta,
-                             relative=True)
-            table_seed = seed * 1000 + int(round(eta * 100)) * 10 + j
-            records = run_walk(params, n_photons=photons, lanes=lanes, max_steps=2**31 - 1, max_path=max_path,
-                               seed=table_seed, progress=progress, label=f"eta {eta} g {g}")
+            records = _walk(eta, g, photons=photons, seed=_table_seed(seed, eta, j), max_path=max_path, lanes=lanes,
+                            progress=progress, label=f"eta {eta} g {g}")
             out = tabulate(records.radius, records.path, records.exit_cos, records.side == 1, records.side == 0,
                            grid=grid, max_path=max_path)
             exitance[i, j], total[i, j], error_total[i, j] = out["exitance"], out["total"], out["error_total"]
@@ -90,8 +216,10 @@ def merge(paths):
     parts = [dict(np.load(p)) for p in paths]
     parts.sort(key=lambda p: p["etas"][0])
     out = dict(parts[0])
-    for key in ("etas", "exitance", "total", "error_total", "lost", "tail_mass"):
-        out[key] = np.concatenate([p[key] for p in parts])
+    for key in ("etas", "exitance", "total", "error_total", "lost", "tail_mass", "early_exitance", "early_second",
+                "own_exitance", "early_weight", "early_total", "early_error_total", "own_total"):
+        if key in out:
+            out[key] = np.concatenate([p[key] for p in parts])
     return out
 
 
@@ -103,8 +231,26 @@ def main():
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     parser.add_argument("--merge", nargs="+", type=Path, help="join parts that hold other etas")
     parser.add_argument("--average", nargs="+", type=Path, help="average parts of the same etas from other seeds")
+    parser.add_argument("--early", type=int, metavar="PHOTONS",
+                        help=f"join PHOTONS short paths (up to {EARLY_MAX_PATH:g} transport lengths) per eta and g "
+                             "to the full tables of --tables (those of --etas)")
+    parser.add_argument("--tables", type=Path, default=DEFAULT_OUT, help="the full tables --early adds to")
+    parser.add_argument("--walked", type=Path, help="take --early's new walk from this earlier output (its early_* "
+                                                    "arrays) instead of walking it again")
     args = parser.parse_args()
-    if args.merge:
+    if args.early or args.walked:
+        tables = dict(np.load(args.tables))
+        keep = np.flatnonzero(np.isin(np.round(tables["etas"], 6), [round(float(e), 6) for e in args.etas.split(",")]))
+        walked = None
+        if args.walked:
+            walked = dict(np.load(args.walked))
+            rows = [int(np.flatnonzero(np.isclose(walked["etas"], e))[0]) for e in tables["etas"][keep]]
+            walked = {key: (value[rows] if key.startswith("early_") and np.ndim(value) >= 2 else value)
+                      for key, value in walked.items()}
+        for key in ("etas", "exitance", "total", "error_total", "lost", "tail_mass"):
+            tables[key] = tables[key][keep]
+        tables = add_early(tables, photons=args.early or 0, walked=walked)
+    elif args.merge:
         tables = merge(args.merge)
     elif args.average:
         tables = average([dict(np.load(p)) for p in args.average])

@@ -23,6 +23,10 @@ probability for its angle (total internal reflection included) or crosses (Snell
 next layer or leaves the stack. Otherwise it collides: its weight is multiplied by the
 albedo :math:`\sigma_s/\sigma_t` (absorption by weight), it scatters by Henyey-Greenstein,
 and below weight 1e-4 Russian roulette keeps one photon in ten at ten times the weight.
+An optional tenth entry of ``params`` (rates, after the start cosine) draws each photon's first
+free path from a mixture of faster exponentials, with its importance weight
+(:func:`_first_flight`): the transport tables' early walks use it to sample the short paths of
+a strongly absorbing medium.
 """
 
 from __future__ import annotations
@@ -148,6 +152,35 @@ def _start_cosine(params):
     return params[8] if len(params) > 8 else 1.0
 
 
+def _first_flight(u_path, sigma_t, rates):
+    r"""The first free path drawn from a mixture of exponentials, and its importance weight.
+
+    ``rates`` (K,) multiply ``sigma_t``; each is drawn with probability 1/K (a rate listed
+    twice, twice as often). The mixture :math:`q(s) = \frac1K\sum_k r_k\sigma_t e^{-r_k\sigma_t s}`
+    puts the first collision near the surface far more often than :math:`p(s) = \sigma_t
+    e^{-\sigma_t s}` does, where a strongly absorbing medium's light comes from; the weight
+    :math:`p/q` (for a flight that reaches a boundary at ``d`` instead, the ratio of the two
+    survival probabilities) keeps every tally unbiased. With a rate of 1 among them the weight is
+    at most K over its count (defensive mixing). ``u_path`` picks the rate and, rescaled, the path.
+    """
+    k = rates.shape[0]
+    scaled = u_path * k
+    pick = jnp.minimum(jnp.floor(scaled), k - 1)
+    u = scaled - pick                  # uniform in (0, 1) again, never 0 (u_path is (word + 1/2) 2^-32)
+    rate = _at_layer(rates, pick.astype(jnp.int32))
+    s = -jnp.log(u) / (sigma_t * rate)
+
+    def weight(length):  # p / q at a collision after ``length``; survival ratio at a boundary
+        mixture = sum(rates[i] * jnp.exp(-(rates[i] - 1) * sigma_t * length) for i in range(k)) / k
+        return 1.0 / mixture
+
+    def survival(length):
+        mixture = sum(jnp.exp(-(rates[i] - 1) * sigma_t * length) for i in range(k)) / k
+        return 1.0 / mixture
+
+    return s, weight, survival
+
+
 def _event_words(key, photon, steps):
     """The four random uint32 words of event ``steps`` of ``photon``: (path, turn, phi, roulette).
 
@@ -188,6 +221,11 @@ def _event(lane: _Lane, key, params) -> _Lane:
     u_path, u_turn, u_phi, u_roulette = (words.astype(dtype) + 0.5) * (2.0**-32)
     u_fresnel = u_theta = u_turn
     s = -jnp.log(u_path) / _at_layer(sigma_t, layer)
+    importance = len(params) > 9  # static: an optional tenth entry, the first flight's rates
+    if importance:
+        first = lane.steps == 0
+        s_first, first_weight, first_survival = _first_flight(u_path, _at_layer(sigma_t, layer), params[9])
+        s = jnp.where(first, s_first, s)
     dz = lane.uz
     to_top = jnp.where(dz < 0, (lane.z - _at_layer(tops, layer)) / jnp.where(dz < 0, -dz, 1.0), jnp.inf)
     to_bottom = jnp.where(dz > 0, (_at_layer(bottoms, layer) - lane.z) / jnp.where(dz > 0, dz, 1.0), jnp.inf)
@@ -221,6 +259,9 @@ def _event(lane: _Lane, key, params) -> _Lane:
     new_uy = turned(lane.uy, lane.uy * ratio, lane.uy, sy)
     new_uz = turned(dz, jnp.sign(dz) * cos_t, -dz, sz)
     new_weight = jnp.where(hits, lane.weight, collided_weight)
+    if importance:
+        factor = jnp.where(hits, first_survival(to_boundary), first_weight(s))
+        new_weight = jnp.where(first, new_weight * factor, new_weight)
     side = jnp.where(leaves, jnp.where(up, 1, 2), jnp.where(new_weight == 0, 3, 0)).astype(jnp.int32)
     return _Lane(x, y, z, new_ux, new_uy, new_uz, new_weight, side,
                  jnp.where(leaves, jnp.hypot(x, y), lane.exit_r),
@@ -290,8 +331,9 @@ def run_walk(params, *, n_photons: int, lanes: int = 4096, max_steps: int = 2000
 
     ``params`` = (sigma_t, albedo, g, tops, bottoms, index, eta_above, eta_below), per layer
     arrays of one dtype (see :mod:`jsss.transport.montecarlo`), optionally followed by the cosine at which
-    photons start inside (an oblique beam after refraction; default 1, along the normal). A
-    photon still inside after ``max_steps`` events or ``max_path`` [mm] of path is recorded as
+    photons start inside (an oblique beam after refraction; default 1, along the normal) and by
+    the first flight's rates (:func:`_first_flight`; each record's weight then carries the
+    importance weight). A photon still inside after ``max_steps`` events or ``max_path`` [mm] of path is recorded as
     lost (side 0). With ``progress`` a line per chunk goes to stderr (a script's choice: the
     library prints nothing by default).
     """

@@ -16,8 +16,9 @@ g in {0, 0.5, 0.8, 0.9}; ``eta`` is interpolated (Catmull-Rom), ``g`` must be on
 tabulated values. Between table nodes :math:`\log T` is interpolated with Catmull-Rom
 splines in :math:`\log\rho'` and :math:`\log a'`, so profiles are smooth in ``r``,
 ``sigma_a``, ``sigma_s_prime`` and ``eta``, and ``jax.grad`` works through them. Their
-accuracy is the Monte Carlo noise of the tables (``photons`` in :func:`table_info`) plus the
-interpolation; ``benchmarks/profiles.py`` measures both against independent walks. The noise
+accuracy is the Monte Carlo noise of the tables (``photons`` in :func:`table_info`, and
+``early_photons`` more, first scattered near the surface more often, for the paths up to four
+transport lengths that make a low albedo's light) plus the interpolation; ``benchmarks/profiles.py`` measures both against independent walks. The noise
 follows from the tables themselves (a cell's second moment is the cell at twice the
 absorption): :func:`cell_relative_variance` per cell, :func:`noise_slice` and
 :func:`slice_cell_errors` for a fit's slice, :func:`slice_relative_error` per model value
@@ -45,7 +46,7 @@ from ..numerics import append_axes, as_float_array, is_concrete
 
 __all__ = ["FixedSlice", "cell_relative_variance", "check_medium", "check_supported", "entry_transmittance",
            "fixed_slice", "noise_slice", "profile", "radiance", "shift_slice", "slice_cell_errors",
-           "slice_relative_error", "slice_values", "table_info", "total_reflectance"]
+           "slice_relative_error", "slice_values", "split_relative_variance", "table_info", "total_reflectance"]
 
 _FLOOR = 1e-30  # added before taking logs: empty table cells (no photon reached them)
 
@@ -128,10 +129,13 @@ def _tables():
 
 def table_info() -> dict:
     """What the shipped tables hold: grids, photons per (eta, g), seed, the walk's cap [transport
-    lengths], the fraction capped per table (``lost``) and the totals' standard errors."""
+    lengths], the fraction capped per table (``lost``) and the totals' standard errors; and the
+    early part: ``early_photons`` more photons per (eta, g) for the paths up to
+    ``early_max_path`` transport lengths (the light of a low albedo)."""
     data = _tables()
-    return {key: data[key] for key in ("etas", "gs", "rho_edges", "mu_edges", "absorption", "photons", "seed",
-                                       "max_path", "lost", "error_total")}
+    keys = ("etas", "gs", "rho_edges", "mu_edges", "absorption", "photons", "seed", "max_path", "lost",
+            "error_total", "early_photons", "early_max_path")
+    return {key: data[key] for key in keys if key in data}
 
 
 def _g_index(g) -> int:
@@ -400,6 +404,13 @@ def entry_transmittance(eta):
 # from the tables themselves. The shipped tables average four independent runs of equal size,
 # which is one run of all their photons. Exit-angle bins divide a cell by its (exact) projected
 # solid angle, which leaves the relative variance as it is; the totals are per photon (A = 1).
+#
+# Each shipped cell blends two walks (scripts/generate_transport_tables.py, ``add_early``): the
+# full walks' paths longer than ``early_max_path`` (late), plus w times a separate walk's paths
+# up to it (``early_exitance``, of ``early_photons``, first flights importance-sampled) and
+# 1 - w times the full walks' own (``own_exitance``), w = ``early_weight`` per absorption node.
+# The identity holds for the plain tallies; the weighted walk's second moments are tabulated
+# (``early_second``). :func:`split_relative_variance` adds them up.
 
 
 def _at_double_absorption(values, absorption):
@@ -418,10 +429,13 @@ def _at_double_absorption(values, absorption):
     out[..., 1:] = np.sum(rows[..., index] * weight, axis=-1)
     beyond = position > n - 1
     out[..., 1:][..., beyond] = rows[..., -1:] + (rows[..., -1:] - rows[..., -2:-1]) * (position[beyond] - (n - 1))
-    return np.exp(out)
+    # An empty cell's extrapolation can overflow (a late tally that vanished at high a'): its
+    # relative variance is then clipped to 1 by the caller, and it carries no value.
+    with np.errstate(over="ignore"):
+        return np.exp(out)
 
 
-def cell_relative_variance(values, absorption, area, photons):
+def cell_relative_variance(values, absorption, area, photons, second=None):
     r"""Relative variance :math:`\mathrm{Var}(T)/T^2` of each Monte Carlo tally of a table, from the table.
 
     Parameters
@@ -435,6 +449,10 @@ def cell_relative_variance(values, absorption, area, photons):
         The cell's area [transport lengths^2] by which the tally was divided.
     photons : int
         The walk's photons N.
+    second : array_like (..., n_a), optional
+        The cells' second moments per photon times their area, :math:`E[X^2] A`, where the walk
+        tallied them (an importance-sampled walk's weights break the identity); by default the
+        identity's :math:`T(2a')`.
 
     Returns
     -------
@@ -450,12 +468,58 @@ def cell_relative_variance(values, absorption, area, photons):
         percent of the cells' value near rho' = 10, less inside).
     """
     values = np.asarray(values, float)
-    second = _at_double_absorption(values, absorption)
+    second = _at_double_absorption(values, absorption) if second is None else np.asarray(second, float)
     area = np.expand_dims(np.asarray(area, float), -1)
     with np.errstate(divide="ignore", invalid="ignore"):
         relative = (second / (area * values**2) - 1.0) / float(photons)
     relative = np.maximum(relative, relative[..., :1])
     return np.where(values > 0, np.clip(np.nan_to_num(relative, nan=1.0, posinf=1.0), 0.0, 1.0), 1.0)
+
+
+def split_relative_variance(values, early, absorption, area, photons, early_photons, early_second=None, *,
+                            own=None, weight=None):
+    r"""Relative variance of cells built from two walks (the shipped tables, see the comment above).
+
+    ``values`` = late + w new + (1 - w) own: ``own`` (the full walk's paths up to the early cap)
+    and late = ``values`` - w ``early`` - (1 - w) ``own`` from a plain walk of ``photons``
+    photons, ``early`` (new) from one of ``early_photons`` whose second moments are
+    ``early_second`` (its first flights are weighted; by default the identity), ``weight`` = w
+    per absorption node (broadcast along the last axis). Then
+
+    .. math::
+
+        \mathrm{Var}(T) = \mathrm{Var}_\ell + w^2\,\mathrm{Var}_\mathrm{new}
+            + (1 - w)^2\,\mathrm{Var}_\mathrm{own} - 2 (1 - w)\,T_\ell T_\mathrm{own} / N,
+
+    each part's variance from :func:`cell_relative_variance` (the last term: a photon is late or
+    early, never both); divided by :math:`T^2`. Without ``own`` (and ``weight``), ``values`` =
+    late + ``early``. Arguments as :func:`cell_relative_variance`; ``early=None`` is that
+    function."""
+    if early is None:
+        return cell_relative_variance(values, absorption, area, photons)
+    values, early = np.asarray(values, float), np.asarray(early, float)
+    w = np.ones(values.shape[-1]) if weight is None else np.asarray(weight, float)
+    own = np.zeros_like(values) if own is None else np.asarray(own, float)
+    late = np.maximum(values - w * early - (1 - w) * own, 0.0)
+    new_variance = cell_relative_variance(early, absorption, area, early_photons, second=early_second) * early**2
+    variance = (cell_relative_variance(late, absorption, area, photons) * late**2 + w**2 * new_variance
+                + (1 - w) ** 2 * cell_relative_variance(own, absorption, area, photons) * own**2
+                - 2 * (1 - w) * late * own / float(photons))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        relative = np.maximum(variance, 0.0) / values**2
+    return np.where(values > 0, np.clip(np.nan_to_num(relative, nan=1.0, posinf=1.0), 0.0, 1.0), 1.0)
+
+
+def _table_relative_variance(cells, parts, area):
+    """:func:`split_relative_variance` of shipped cells (``(eta, g, ..., n_a)``) and their early
+    parts (``parts``: new, its second moments, own; ``None`` for tables without one)."""
+    data = _tables()
+    if parts is None:
+        return cell_relative_variance(cells, data["absorption"], area, data["photons"])
+    early, second, own = parts
+    weight = data["early_weight"].reshape(data["early_weight"].shape[:2] + (1,) * (cells.ndim - 3) + (-1,))
+    return split_relative_variance(cells, early, data["absorption"], area, data["photons"], data["early_photons"],
+                                   second, own=own, weight=weight)
 
 
 @functools.lru_cache(maxsize=None)
@@ -465,8 +529,14 @@ def _noise_tables():
     data = _tables()
     cells = data["exitance"].astype(np.float64)                          # (eta, g, rho, a, mu)
     area = np.pi * np.diff(data["rho_edges"] ** 2)
-    per_bin = cell_relative_variance(np.moveaxis(cells, -1, 2), data["absorption"], area, data["photons"])
-    summed = cell_relative_variance(cells.sum(-1)[:, :, None], data["absorption"], area, data["photons"])
+    if "early_exitance" in data:
+        parts = [data[key].astype(np.float64) for key in ("early_exitance", "early_second", "own_exitance")]
+        # A photon leaves into one exit-angle bin: a summed cell's second moment is its bins' sum.
+        per_bin = _table_relative_variance(np.moveaxis(cells, -1, 2), [np.moveaxis(p, -1, 2) for p in parts], area)
+        summed = _table_relative_variance(cells.sum(-1)[:, :, None], [p.sum(-1)[:, :, None] for p in parts], area)
+    else:
+        per_bin = _table_relative_variance(np.moveaxis(cells, -1, 2), None, area)
+        summed = _table_relative_variance(cells.sum(-1)[:, :, None], None, area)
     return {"radiance": per_bin, "exitance": summed}
 
 

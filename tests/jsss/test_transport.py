@@ -94,24 +94,43 @@ def test_total_matches_adding_doubling_within_half_a_percent(albedo, g, eta):
     assert float(transport.total_reflectance(medium, g=g)) == pytest.approx(expected, rel=0.005 + 3 * noise)
 
 
-@pytest.mark.parametrize("eta", [1.0, 1.3, 1.5])
-@pytest.mark.parametrize("albedo", [0.0203, 0.067, 0.1])
-def test_low_albedo_totals_are_within_the_tables_own_noise_of_adding_doubling(albedo, eta):
-    """Ketchup's green and blue (reduced albedo 0.067 and 0.020, issue 37): against adding-doubling
-    (iadpython, 64 optical depths, 32 quadrature points) the tables' totals are, measured
-    2026-12-04, +1.6 to +2.0 % high at eta 1.3 for albedo' 0.02-0.1, +0.3 to +1.1 % at eta 1.5,
-    and within 0.16 % at eta 1.0. The likely cause is the tables' own noise: one Monte Carlo
-    realisation per eta and g (2 x 10^6 photons), where the short paths that set a low albedo's
-    total are the same photons at every albedo, so their fluctuation is one offset; at eta 1.3
-    it is 1.8-2.5 of the tables' stated standard errors (``error_total``: 0.6-1.1 %). This is the tables' stated limit, not the 0.5 % the
-    issue asks for; the stated errors carry it within 3 of its standard errors."""
-    sample = iadpython.Sample(a=albedo, b=64.0, g=0.0, n=eta, n_above=1.0, n_below=1.0, quad_pts=32)
-    UR1, _, _, _ = sample.rt()
+def _adding_doubling_total(reduced_albedo, eta, g):
+    """iadpython (64 optical depths, 32 quadrature points): the total per unit entering flux of a
+    half space of this reduced albedo, and its medium (sigma_t 1)."""
+    albedo = reduced_albedo / (1 - g + g * reduced_albedo)       # single-scattering albedo
+    UR1, _, _, _ = iadpython.Sample(a=albedo, b=64.0, g=g, n=eta, n_above=1.0, n_below=1.0, quad_pts=32).rt()
     specular = float(1 - transport.entry_transmittance(eta))
-    expected = (UR1 - specular) / (1 - specular)
-    medium = Medium(1 - albedo, albedo, eta)
-    noise = table_total_error(eta, 0.0, float(medium.sigma_a / medium.sigma_s_prime))
-    assert float(transport.total_reflectance(medium)) == pytest.approx(expected, rel=3 * noise)
+    return (UR1 - specular) / (1 - specular), Medium(1 - albedo, albedo * (1 - g), eta)
+
+
+@pytest.mark.parametrize("g", [0.0, 0.5])
+@pytest.mark.parametrize("eta", [1.0, 1.3, 1.6])
+@pytest.mark.parametrize("reduced_albedo", [0.0203, 0.067, 0.1])
+def test_low_albedo_totals_are_within_half_a_percent_of_adding_doubling(reduced_albedo, eta, g):
+    """Ketchup's green and blue (reduced albedo 0.067 and 0.020, issue 37) against adding-doubling,
+    which shares nothing with the walk. With the full walks' 2 x 10^6 photons alone the totals at
+    reduced albedo 0.02-0.2 were up to 3.3 % off at g = 0 and 2.2 % at g = 0.5 over eta 1.0-1.6
+    (at eta 1.3, g = 0: +1.6 to +2.0 %, 1.8-2.5 of their standard errors: noise, one realisation
+    of the few short paths that make a low albedo's light). The tables' early part (10^7 more
+    photons for the paths up to 4 transport lengths, first flights importance-sampled) brings
+    them within 0.33 % (g = 0) and 0.49 % (g = 0.5) at every eta 1.0-1.6 (measured 2026-12-05;
+    here within 0.15 % and 0.29 %)."""
+    expected, medium = _adding_doubling_total(reduced_albedo, eta, g)
+    assert float(transport.total_reflectance(medium, g=g)) == pytest.approx(expected, rel=0.005)
+
+
+@pytest.mark.parametrize("eta", [1.0, 1.3, 1.6])
+@pytest.mark.parametrize("reduced_albedo", [0.0203, 0.067, 0.1])
+def test_low_albedo_totals_at_g_09_are_within_three_stated_errors_of_adding_doubling(reduced_albedo, eta):
+    """At g = 0.9 the importance-sampled first flight helps less: the light of a low albedo then
+    needs a rare backward scattering, not a shallow first collision. The tables' stated errors at
+    reduced albedo 0.02-0.1 are 0.24-0.80 %, and the totals stay within 3 of them (measured
+    2026-12-05: -0.91 to +1.80 %, z -2.6 to +2.6; before the early part, up to 3.9 %). Adding-
+    doubling's own error grows here too (32 quadrature points for a phase function this peaked,
+    delta-M), so this is the tables' stated limit, not the 0.5 % the issue asks for."""
+    expected, medium = _adding_doubling_total(reduced_albedo, eta, 0.9)
+    noise = table_total_error(eta, 0.9, float(medium.sigma_a / medium.sigma_s_prime))
+    assert float(transport.total_reflectance(medium, g=0.9)) == pytest.approx(expected, rel=3 * noise)
 
 
 def test_non_absorbing_medium_returns_all_light():
