@@ -73,7 +73,7 @@ from jsss.render.methods.base import entry_irradiance
 from jsss.render.profiles import full_profile, profile_radii, render_profile
 from jsss.render.surface_maps import SurfaceMaps
 
-__all__ = ["AlbedoMapError", "AlbedoMapFit", "fit_albedo_map"]
+__all__ = ["AlbedoMapError", "AlbedoMapFit", "fit_albedo_map", "without_legs"]
 
 
 # Re-plan (and recompile) only when a Gaussian's variance moved by more: the weights are refitted
@@ -206,6 +206,14 @@ class _View(eqx.Module):
     gain: jax.Array
 
 
+def without_legs(plan):
+    """``plan`` with the passes "first leg" and "last leg" off: the albedo-map fit's model holds
+    neither (with the legs' reads past a rim its recovery missed, tests/fitting/test_albedo_map.py),
+    so a render meant to match the fit's model, as its tests' photos, turns them off too."""
+    reason = "the albedo-map fit's model holds no leg"
+    return plan.replace(Pass.FIRST_LEG, False, reason).replace(Pass.LAST_LEG, False, reason)
+
+
 def _plan_for(scene, medium, map_shape, accuracy, specular):
     """A texture-space plan of ``scene`` with ``medium`` and a colour map of ``map_shape``."""
     maps = SurfaceMaps(albedo=np.full(tuple(map_shape) + (3,), 0.5),
@@ -213,10 +221,7 @@ def _plan_for(scene, medium, map_shape, accuracy, specular):
     material = dataclasses.replace(scene.material, medium=medium, maps=maps,
                                    profile_model=scene.material.profile_model, profile=None)
     fit_scene = dataclasses.replace(scene, material=material)
-    plan = plan_scene(fit_scene, accuracy=accuracy, method=Method.TEXTURE_SPACE)
-    # Its model holds no leg: with the legs' reads past a rim its recovery missed (tests/fitting)
-    plan = plan.replace(Pass.FIRST_LEG, False, "the albedo-map fit's model holds no leg").replace(
-        Pass.LAST_LEG, False, "the albedo-map fit's model holds no leg")
+    plan = without_legs(plan_scene(fit_scene, accuracy=accuracy, method=Method.TEXTURE_SPACE))
     if not specular:
         plan = plan.replace(Pass.SPECULAR, False, "the photo holds subsurface light only")
     return fit_scene, plan

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from fitting.albedo_map import AlbedoMapError, fit_albedo_map
+from fitting.albedo_map import AlbedoMapError, fit_albedo_map, without_legs
 from jsss.render import parse_scene, plan_scene, render
 from jsss.render.surface_maps import SurfaceMaps
 
@@ -60,9 +60,8 @@ def problem():
     truth = _checker(MAP)
     textured = dataclasses.replace(scene, material=dataclasses.replace(scene.material,
                                                                        maps=SurfaceMaps(albedo=truth)))
-    # the passes the fit models (it holds no leg: fitting.albedo_map._plan_for)
-    plan = plan_scene(textured, accuracy=0.001, method="texture-space").replace("first leg", False, "fit's model") \
-        .replace("last leg", False, "fit's model")
+    # the passes the fit models
+    plan = without_legs(plan_scene(textured, accuracy=0.001, method="texture-space"))
     clean = np.asarray(render(textured, plan, dtype=jnp.float64).radiance)
     sigma = NOISE * np.maximum(clean, 0.01 * clean.max())
     rng = np.random.default_rng(1)
@@ -163,8 +162,7 @@ def test_the_command_writes_a_map_that_renders_the_photo(tmp_path, capsys):
     rows, cols = np.indices((8, 8))
     truth = np.where(((rows // 4 + cols // 2) % 2)[..., None], [0.9, 0.6, 0.3], [0.4, 0.7, 0.8])  # not symmetric
     painted = dataclasses.replace(scene, material=dataclasses.replace(scene.material, maps=SurfaceMaps(albedo=truth)))
-    plan = plan_scene(painted, accuracy=0.001, method="texture-space").replace("first leg", False, "fit's model") \
-        .replace("last leg", False, "fit's model")  # the passes the fit models (it holds no leg)
+    plan = without_legs(plan_scene(painted, accuracy=0.001, method="texture-space"))  # the passes the fit models
     clean = np.asarray(render(painted, plan, dtype=jnp.float64).radiance)
     photo = clean * (1 + 0.01 * np.random.default_rng(3).standard_normal(clean.shape))
     write_exr(tmp_path / "photo.exr", photo.astype(np.float32))
@@ -176,8 +174,8 @@ def test_the_command_writes_a_map_that_renders_the_photo(tmp_path, capsys):
                                                     "photo.fit.json", "photo.fit.png"}
     fitted = load_scene(tmp_path / "photo.fit.toml")
     assert fitted.material.maps.colour is not None
-    again = np.asarray(render(fitted, plan_scene(fitted, accuracy=0.001, method="texture-space").replace(
-        "first leg", False, "fit's model").replace("last leg", False, "fit's model"), dtype=jnp.float64).radiance)
+    again = np.asarray(render(fitted, without_legs(plan_scene(fitted, accuracy=0.001, method="texture-space")),
+                              dtype=jnp.float64).radiance)
     lit = clean > 0.05 * clean.max()
     # The fit's pixels, not the silhouette's: within 3 % (the noise is 1 % per pixel, each texel
     # is seen by a few pixels); a flipped map is 30-50 % off on the checker's squares
