@@ -193,14 +193,14 @@ def _pooled_variance(variance, mean, counts):
         positive = has_dof & (x > 0)
         slope = np.median(np.maximum(y[positive] - read, 0) / x[positive]) if positive.any() else 0.0
         model = read + slope * x
-        use = (dof > 0) & ((y <= 4 * model) | (model <= 0))
+        use = has_dof & ((y <= 4 * model) | (model <= 0))
         for _ in range(3):
             weights = np.sqrt(dof * use)[:, None]
             # Non-negative least squares, not lstsq clipped afterwards (a clipped negative
             # read term would leave the slope fitted for it).
             (a, b), _ = scipy.optimize.nnls(design * weights, y * weights[:, 0])
             model = a + b * x
-            use = (dof > 0) & ((y <= 4 * model) | (model <= 0))
+            use = has_dof & ((y <= 4 * model) | (model <= 0))
         pooled[:, c] = np.where(model > 0, model, y)
     return pooled
 

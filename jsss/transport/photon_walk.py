@@ -31,6 +31,7 @@ a strongly absorbing medium.
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import time
@@ -170,14 +171,11 @@ def _first_flight(u_path, sigma_t, rates):
     rate = _at_layer(rates, pick.astype(jnp.int32))
     s = -jnp.log(u) / (sigma_t * rate)
 
-    def weight(length):  # p / q at a collision after ``length``; survival ratio at a boundary
-        mixture = sum(rates[i] * jnp.exp(-(rates[i] - 1) * sigma_t * length) for i in range(k)) / k
-        return 1.0 / mixture
+    def inverse_mixture(length, factors):  # k / sum_i factors_i e^{-(r_i - 1) sigma_t length}
+        return 1.0 / (sum(factors[i] * jnp.exp(-(rates[i] - 1) * sigma_t * length) for i in range(k)) / k)
 
-    def survival(length):
-        mixture = sum(jnp.exp(-(rates[i] - 1) * sigma_t * length) for i in range(k)) / k
-        return 1.0 / mixture
-
+    weight = functools.partial(inverse_mixture, factors=rates)  # p / q at a collision after ``length``
+    survival = functools.partial(inverse_mixture, factors=[1.0] * k)  # the survival ratio at a boundary
     return s, weight, survival
 
 

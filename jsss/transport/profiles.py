@@ -529,14 +529,14 @@ def _noise_tables():
     data = _tables()
     cells = data["exitance"].astype(np.float64)                          # (eta, g, rho, a, mu)
     area = np.pi * np.diff(data["rho_edges"] ** 2)
-    if "early_exitance" in data:
-        parts = [data[key].astype(np.float64) for key in ("early_exitance", "early_second", "own_exitance")]
-        # A photon leaves into one exit-angle bin: a summed cell's second moment is its bins' sum.
-        per_bin = _table_relative_variance(np.moveaxis(cells, -1, 2), [np.moveaxis(p, -1, 2) for p in parts], area)
-        summed = _table_relative_variance(cells.sum(-1)[:, :, None], [p.sum(-1)[:, :, None] for p in parts], area)
-    else:
-        per_bin = _table_relative_variance(np.moveaxis(cells, -1, 2), None, area)
-        summed = _table_relative_variance(cells.sum(-1)[:, :, None], None, area)
+    parts = ([data[key].astype(np.float64) for key in ("early_exitance", "early_second", "own_exitance")]
+             if "early_exitance" in data else None)
+
+    def relative(arrange):  # every array arranged alike; a summed cell's second moment is its bins' sum
+        return _table_relative_variance(arrange(cells), None if parts is None else [arrange(p) for p in parts], area)
+
+    per_bin = relative(lambda x: np.moveaxis(x, -1, 2))   # a photon leaves into one exit-angle bin
+    summed = relative(lambda x: x.sum(-1)[:, :, None])
     return {"radiance": per_bin, "exitance": summed}
 
 
