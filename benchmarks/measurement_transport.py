@@ -2,8 +2,9 @@
 
 Images: :func:`measure.synth_transport.synthesize_walk` (own random walks with absorption in
 the walk and their own seeds, not the tables; one channel; transport length 1 mm). The
-camera accepts photons within ``--cone`` degrees of the normal (default 20.7, the tables'
-top exit-angle bin, so model and truth average the same directions). Models, each on the
+camera looks from exactly 0 degrees (next-event estimates of an independent walk,
+:func:`measure.synth_transport.camera_walk`, since 2026-12-06); ``--cone 20.7`` instead accepts
+a jsss walk's photons within that angle of the normal, as the tables held before. Models, each on the
 same image, all reading the image as a camera's radiance at 0 degrees (the contract):
 ``dipole`` (diffusion exit law) and ``transport`` (scaled Monte Carlo tables); and, to show
 what the contract fixes, ``transport`` reading the image as exitance.
@@ -66,7 +67,8 @@ def _geometry(albedo, *, field, pixel_mm, size):
 def _image(medium, *, g, photons, cone, pixel_mm, size, seed, cache):
     """One walk image, from ``cache`` when it holds one with these parameters."""
     key = dict(sigma_a=float(medium.sigma_a), sigma_s_prime=float(medium.sigma_s_prime), eta=float(medium.eta),
-               g=float(g), photons=int(photons), cone=round(float(cone), 6), pixel_mm=round(float(pixel_mm), 9),
+               g=float(g), photons=int(photons), cone="exact" if cone is None else round(float(cone), 6),
+               pixel_mm=round(float(pixel_mm), 9),
                size=int(size), seed=int(seed))
     path = None
     if cache:
@@ -96,7 +98,7 @@ def _image(medium, *, g, photons, cone, pixel_mm, size, seed, cache):
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--photons", type=int, default=None, help="photons per image (default: per albedo, above)")
-    parser.add_argument("--cone", type=float, default=float(np.degrees(np.arccos(np.sqrt(0.875)))))
+    parser.add_argument("--cone", type=float, default=None, help="a cone camera [degrees] instead of the exact direction")
     parser.add_argument("--field", type=float, default=4.0, help="half-width of the image in diffusion lengths")
     parser.add_argument("--size", type=int, default=256, help="image side [pixels]")
     parser.add_argument("--pixel-mm", type=float, default=None, help="fixed pixel size (overrides --field)")
@@ -110,7 +112,8 @@ def main():
     if args.quick:
         args.albedos, args.etas, args.gs, args.photons = [0.9, 0.99], [1.3], [0.0], args.photons or 300_000
     grid = hankel.hankel_grid()
-    print(f"# fit-params on walk camera images ({datetime.date.today().isoformat()}, cone {args.cone:.1f} deg, "
+    camera = "exact 0 deg" if args.cone is None else f"cone {args.cone:.1f} deg"
+    print(f"# fit-params on walk camera images ({datetime.date.today().isoformat()}, {camera}, "
           f"{args.size} px, half-field {args.field} diffusion lengths)")
     print("| albedo' | eta | g | photons | pixel mm | model | reads as | sigma_a error (z) | sigma_s' error (z) "
           "| chi2/dof | converged | ms per fit |")

@@ -16,7 +16,9 @@ photons). The shipped tables: ``--photons 500000 --seeds 0,1`` (two independent 
 2 x 10^6 photons per (eta, g); then ``--early 10000000 --tables FULL.npz`` (about 28 minutes
 on 2 cores): 10^7 more photons per (eta, g) for the paths up to 4 transport lengths, which set
 the light of a low albedo (see ``add_early``). ``--walked EARLIER.npz`` blends an earlier
-run's early walks again (minutes).
+run's early walks again (minutes). Last, ``--views 1000000 --tables FULL.npz`` (about 20
+minutes in two processes of --etas 1.0,1.1,1.2,1.3 and 1.4,1.5,1.6, then ``--merge``): the early
+part's radiance toward exact view directions (see ``add_views``).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from jsss import Medium  # noqa: E402
 from jsss.transport.montecarlo import _params  # noqa: E402
 from jsss.transport.photon_walk import run_walk  # noqa: E402
 from jsss.transport.tables import TableGrid, tabulate, tail_total_closed_form  # noqa: E402
+from jsss.transport.view_walk import VIEW_DEGREES, view_tables  # noqa: E402
 
 ETAS = (1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6)
 GS = (0.0, 0.5, 0.8, 0.9)
@@ -56,6 +59,11 @@ def _early_seed(run, eta, j):
     """Seeds of the early walks: far from the full walks' (``_table_seed`` of seeds 0-3 is below
     5000) and from the tests' and benchmarks' truths (below 10^6), so no stream is shared."""
     return 7_000_000 + run * 10_000 + int(round(eta * 100)) * 10 + j
+
+
+def _view_seed(eta, j):
+    """Seeds of the view walks (NumPy's generator, not the walk engine's counters): apart from all above."""
+    return 9_000_000 + round(float(eta) * 100) * 10 + j
 
 
 def _walk(eta, g, *, photons, seed, max_path, lanes=4096, progress=False, label="", first_flight_rates=None):
@@ -169,6 +177,42 @@ def add_early(tables, *, photons, max_path=EARLY_MAX_PATH, progress=True, walked
     return out
 
 
+def add_views(tables, *, photons, progress=True):
+    r"""Add the radiance toward exact view directions (0, 10, ..., 80 degrees outside) for the early part.
+
+    The cones' early part (paths whose last collision lies within ``early_max_path``, the blend
+    ``w new + (1 - w) own`` of :func:`add_early`) is where the cone average and the exact
+    direction differ: single scattering and the first few orders, whose light has a sharp
+    angular and radial structure near the beam. :func:`jsss.transport.view_walk.view_tables`
+    estimates that same early part toward each view by next-event estimates, with ``photons``
+    photons per (eta, g) and the early walks' first-flight mixture. The file keeps it as
+    ``view_radiance`` (eta, g, view, rho, a) with ``view_variance`` (each cell's variance of the
+    mean, from 20 independent batches), ``view_cos`` and ``view_photons``;
+    :mod:`jsss.transport.profiles` joins it to the cones' late part (the shipped cells less
+    their early blend, interpolated to the view).
+    """
+    if "early_photons" not in tables:
+        raise SystemExit("--views needs tables with an early part (--early) first")
+    grid = TableGrid()
+    shape = tables["early_weight"].shape[:2] + (len(VIEW_DEGREES), grid.rho_edges.size - 1, grid.absorption.size)
+    radiance, variance = np.zeros(shape), np.zeros(shape)
+    for i, eta in enumerate(tables["etas"]):
+        for j, g in enumerate(tables["gs"]):
+            start = time.perf_counter()
+            out = view_tables(float(eta), float(g), photons=photons, max_path=float(tables["early_max_path"]),
+                              seed=_view_seed(eta, j), first_flight_rates=FIRST_FLIGHT_RATES, grid=grid)
+            radiance[i, j], variance[i, j] = out["radiance"], out["variance"]
+            if progress:
+                near = np.searchsorted(grid.rho_edges, 0.3) - 1
+                print(f"eta {eta} g {g}: view radiance at 0 degrees, rho' {grid.rho_edges[near]:.2f}, a' 0: "
+                      f"{radiance[i, j, 0, near, 0]:.4g} +- {np.sqrt(variance[i, j, 0, near, 0]):.1g}, "
+                      f"{time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
+    out = dict(tables)
+    out.update(view_radiance=radiance.astype(np.float32), view_variance=variance.astype(np.float32),
+               view_cos=np.cos(np.radians(np.asarray(VIEW_DEGREES))), view_photons=np.int64(photons))
+    return out
+
+
 def build(etas, gs, *, photons, seed, max_path=MAX_PATH, lanes=4096, progress=True):
     grid = TableGrid()
     shape = (len(etas), len(gs))
@@ -217,7 +261,8 @@ def merge(paths):
     parts.sort(key=lambda p: p["etas"][0])
     out = dict(parts[0])
     for key in ("etas", "exitance", "total", "error_total", "lost", "tail_mass", "early_exitance", "early_second",
-                "own_exitance", "early_weight", "early_total", "early_error_total", "own_total"):
+                "own_exitance", "early_weight", "early_total", "early_error_total", "own_total", "view_radiance",
+                "view_variance"):
         if key in out:
             out[key] = np.concatenate([p[key] for p in parts])
     return out
@@ -234,11 +279,21 @@ def main():
     parser.add_argument("--early", type=int, metavar="PHOTONS",
                         help=f"join PHOTONS short paths (up to {EARLY_MAX_PATH:g} transport lengths) per eta and g "
                              "to the full tables of --tables (those of --etas)")
+    parser.add_argument("--views", type=int, metavar="PHOTONS",
+                        help="add the early part's radiance toward exact view directions (next-event estimates of "
+                             "PHOTONS photons per eta and g) to the tables of --tables (those of --etas)")
     parser.add_argument("--tables", type=Path, default=DEFAULT_OUT, help="the full tables --early adds to")
     parser.add_argument("--walked", type=Path, help="take --early's new walk from this earlier output (its early_* "
                                                     "arrays) instead of walking it again")
     args = parser.parse_args()
-    if args.early or args.walked:
+    if args.views:
+        tables = dict(np.load(args.tables))
+        keep = np.flatnonzero(np.isin(np.round(tables["etas"], 6), [round(float(e), 6) for e in args.etas.split(",")]))
+        n_etas = tables["etas"].size
+        tables = {key: (value[keep] if np.ndim(value) >= 1 and value.shape[0] == n_etas and key != "seed" else value)
+                  for key, value in tables.items()}
+        tables = add_views(tables, photons=args.views)
+    elif args.early or args.walked:
         tables = dict(np.load(args.tables))
         keep = np.flatnonzero(np.isin(np.round(tables["etas"], 6), [round(float(e), 6) for e in args.etas.split(",")]))
         walked = None

@@ -98,21 +98,79 @@ def _centre_values(log_cells, axis, log_step):
     return np.moveaxis(out, -1, axis)
 
 
+def _cone_weights(mu_nodes, cos_exit):
+    """(len(cos_exit), n_mu): each cosine's weights on the exit-angle bins, linear in mu between
+    their centres and all on the outermost one beyond them."""
+    position = np.interp(np.asarray(cos_exit, float), mu_nodes, np.arange(mu_nodes.size))
+    lower = np.minimum(np.floor(position).astype(int), mu_nodes.size - 2)
+    t = position - lower
+    weights = np.zeros((position.size, mu_nodes.size))
+    np.put_along_axis(weights, lower[:, None], (1 - t)[:, None], axis=1)
+    np.put_along_axis(weights, lower[:, None] + 1, t[:, None], axis=1)
+    return weights
+
+
+def _late_radiance(data):
+    """The cones' late part as radiance, (eta, g, rho, a, mu): each shipped cell less its early
+    blend ``w new + (1 - w) own`` (the paths whose last collision lies within the early cap),
+    per projected solid angle of its bin."""
+    weight = data["early_weight"][:, :, None, :, None]
+    blend = weight * data["early_exitance"].astype(np.float64) + (1 - weight) * data["own_exitance"].astype(np.float64)
+    late = np.maximum(data["exitance"].astype(np.float64) - blend, 0.0)
+    return late / (np.pi * np.diff(data["mu_edges"] ** 2))
+
+
+def _late_view_weights(data, late):
+    """(eta, g, a, view, mu): the weights that give the late part toward each view from its cones.
+
+    Between the cones' centres, linear in mu. Past the outermost centres (0 and 10 degrees lie
+    above the top cone's 14.5, 80 below the last one's 75.5) the late light's angular slope is
+    taken from all radii pooled, per (eta, g, a'): the shape of diffuse light leaving does not
+    depend on where it leaves, and a cell's own two cones would add their noise (one cell's
+    slope read +0.5 to +1.7 % at 0 degrees, g 0, eta 1.3; pooled it is +0.3 %). At 80 degrees
+    the light falls toward grazing: -11 %."""
+    nodes = data["mu_nodes"]
+    base = _cone_weights(nodes, data["view_cos"])                          # (view, mu)
+    area = np.pi * np.diff(data["rho_edges"] ** 2)
+    pooled = np.einsum("egram,r->egam", late, area)                         # (eta, g, a, mu)
+    weights = np.broadcast_to(base, pooled.shape[:3] + base.shape).copy()
+    for k, mu in enumerate(data["view_cos"]):
+        for outer, inner in ((-1, -2), (0, 1)):
+            beyond = mu > nodes[-1] if outer == -1 else mu < nodes[0]
+            if not beyond:
+                continue
+            with np.errstate(divide="ignore", invalid="ignore"):
+                slope = (pooled[..., outer] - pooled[..., inner]) / ((nodes[outer] - nodes[inner]) * pooled[..., outer])
+            # Where the late part vanishes (a' of tens) its pooled slope is noise: diffuse light's
+            # relative slope in mu lies within +-3 (Lambertian 0, Fresnel-limited at grazing ~2).
+            weights[..., k, outer] = 1 + (mu - nodes[outer]) * np.clip(np.nan_to_num(slope, nan=0.0), -3.0, 3.0)
+    return weights
+
+
 class _Tables(dict):
     """The shipped arrays, and the log-profiles built from them on first use: a scene that only
     asks for totals (the planner's profile choice) does not pay 0.2-0.3 s of cold start to fill
-    and centre 73 x 42 x 8 cells per eta and g."""
+    and centre 73 x 42 x 8 cells per eta and g.
+
+    ``log_view_radiance`` (eta, g, rho, a, view): the radiance toward each exact view direction
+    (``view_cos``; issue 37). Its early part, the paths whose last collision lies within the
+    early cap, is the walk's next-event estimates toward that direction (``view_radiance``,
+    :mod:`jsss.transport.view_walk`); its late part is the cones' late part, linear in mu between
+    their centres: light that has travelled more than four transport lengths is diffuse, and
+    its angular dependence is smooth."""
 
     def __missing__(self, key):
-        if key not in ("log_exitance", "log_radiance"):
+        if key not in ("log_exitance", "log_view_radiance"):
             raise KeyError(key)
-        exitance = self["exitance"].astype(np.float64)                     # (eta, g, rho, a, mu)
         log_step = np.log10(self["rho_edges"][2]) - np.log10(self["rho_edges"][1])
         if key == "log_exitance":                                           # (eta, g, rho, a)
+            exitance = self["exitance"].astype(np.float64)
             value = _centre_values(_log_filled(exitance.sum(-1), axis=2), 2, log_step)
-        else:                                                               # (eta, g, rho, a, mu)
-            solid = np.pi * np.diff(self["mu_edges"] ** 2)                  # projected solid angle of each mu bin
-            value = _centre_values(_log_filled(exitance / solid, axis=2), 2, log_step)
+        else:                                                               # (eta, g, rho, a, view)
+            late = _late_radiance(self)
+            late = np.einsum("egram,egakm->egrak", late, _late_view_weights(self, late))
+            view = np.moveaxis(self["view_radiance"].astype(np.float64), 2, -1)
+            value = _centre_values(_log_filled(late + view, axis=2), 2, log_step)
         self[key] = value
         return value
 
@@ -131,10 +189,11 @@ def table_info() -> dict:
     """What the shipped tables hold: grids, photons per (eta, g), seed, the walk's cap [transport
     lengths], the fraction capped per table (``lost``) and the totals' standard errors; and the
     early part: ``early_photons`` more photons per (eta, g) for the paths up to
-    ``early_max_path`` transport lengths (the light of a low albedo)."""
+    ``early_max_path`` transport lengths (the light of a low albedo); and ``view_photons`` per
+    (eta, g) of next-event estimates toward the view directions ``view_cos`` for those paths."""
     data = _tables()
     keys = ("etas", "gs", "rho_edges", "mu_edges", "absorption", "photons", "seed", "max_path", "lost",
-            "error_total", "early_photons", "early_max_path")
+            "error_total", "early_photons", "early_max_path", "view_cos", "view_photons")
     return {key: data[key] for key in keys if key in data}
 
 
@@ -302,46 +361,49 @@ def total_reflectance(medium: Medium, *, g: float = 0.0):
 
 
 def _exit_bins(cos_exit: float) -> list[tuple[int, float]]:
-    """The exit-angle bins toward one (concrete) cosine and their weights, linear in mu between
-    bin centres. Beyond the outermost centres (a camera along the normal: cos 1 lies past the
-    last node) one bin has all the weight, and only it is listed, so only it is evaluated."""
-    nodes = _tables()["mu_nodes"]
-    position = float(np.interp(cos_exit, nodes, np.arange(nodes.size)))
-    lower = min(int(np.floor(position)), nodes.size - 2)
+    """The view directions toward one (concrete) cosine and their weights, linear in mu between
+    them (0, 10, ..., 80 degrees). Past 80 degrees the last view has all the weight; a view the
+    cosine meets exactly is listed alone, so only it is evaluated."""
+    ascending = _tables()["view_cos"][::-1]
+    position = float(np.interp(cos_exit, ascending, np.arange(ascending.size)))
+    lower = min(int(np.floor(position)), ascending.size - 2)
     t = position - lower
-    return [(m, w) for m, w in ((lower, 1 - t), (lower + 1, t)) if w != 0]
+    last = ascending.size - 1
+    return [(last - m, w) for m, w in ((lower, 1 - t), (lower + 1, t)) if w != 0]
 
 
 def radiance(medium: Medium, r, cos_exit, *, g: float = 0.0):
     r"""Radiance leaving the surface at ``r`` toward exit cosine ``cos_exit`` [1/(mm^2 sr)],
-    per unit entering flux: what a camera at that angle records (before its own units).
+    per unit entering flux: what a camera at that angle records (before its own units),
+    averaged over the azimuth of the direction (the beam is symmetric about the normal).
 
-    The tables bin exit directions in 8 bins of equal projected solid angle; the radiance is
-    linear in :math:`\mu` between their centres and constant beyond the outermost ones.
-    ``r`` and ``cos_exit`` broadcast together (shape ``S``); the result is ``S + C``.
+    The tables hold the radiance toward 0, 10, ..., 80 degrees (the early paths' next-event
+    estimates toward each; see :class:`_Tables`); it is linear in :math:`\mu` between them and
+    constant past 80 degrees. ``r`` and ``cos_exit`` broadcast together (shape ``S``); the
+    result is ``S + C``.
     """
     _check(medium)
     data = _tables()
     sigma_s_prime, ratio, eta = _coefficients(medium)
-    table = np.moveaxis(data["log_radiance"][:, _g_index(g)], -1, 1)   # (eta, mu, rho, a)
-    log_rows = _interpolate_eta_absorption(table, eta, ratio, data["etas"], data["absorption"])  # C + (mu, rho)
+    table = np.moveaxis(data["log_view_radiance"][:, _g_index(g)], -1, 1)   # (eta, view, rho, a)
+    log_rows = _interpolate_eta_absorption(table, eta, ratio, data["etas"], data["absorption"])  # C + (view, rho)
     r, cos_exit = jnp.broadcast_arrays(as_float_array(r), as_float_array(cos_exit))
     r = append_axes(r, len(medium.shape))
     cos_exit = append_axes(cos_exit, len(medium.shape))
     rho = r * sigma_s_prime
-    nodes = data["mu_nodes"]
     if is_concrete(cos_exit) and np.ptp(np.asarray(cos_exit)) == 0:
-        # One exit angle for every radius (a camera, a fit): only its two neighbouring bins
-        # are evaluated, a quarter of the radial interpolation's cost.
+        # One exit angle for every radius (a camera, a fit): only its one or two views are
+        # evaluated, a fifth of the radial interpolation's cost.
         mixed = sum(weight * jnp.exp(_radial(log_rows[..., m, :], rho, data["rho_edges"]))
                     for m, weight in _exit_bins(float(np.asarray(cos_exit).reshape(-1)[0])))
         return sigma_s_prime**2 * jnp.maximum(mixed - _FLOOR, 0.0)
-    per_bin = jnp.stack([jnp.exp(_radial(log_rows[..., m, :], rho, data["rho_edges"])) for m in range(nodes.size)],
-                        axis=-1)
+    nodes = data["view_cos"][::-1]                                             # ascending
+    per_view = jnp.stack([jnp.exp(_radial(log_rows[..., m, :], rho, data["rho_edges"]))
+                          for m in range(nodes.size - 1, -1, -1)], axis=-1)    # ascending in mu
     position = jnp.interp(cos_exit, nodes, np.arange(nodes.size, dtype=float))
     lower = jnp.clip(jnp.floor(position).astype(jnp.int32), 0, nodes.size - 2)
     t = position - lower
-    pick = lambda i: jnp.take_along_axis(per_bin, i[..., None], axis=-1)[..., 0]  # noqa: E731
+    pick = lambda i: jnp.take_along_axis(per_view, i[..., None], axis=-1)[..., 0]  # noqa: E731
     value = (1 - t) * pick(lower) + t * pick(lower + 1)
     return sigma_s_prime**2 * jnp.maximum(value - _FLOOR, 0.0)
 
@@ -370,7 +432,7 @@ def fixed_slice(eta, *, g: float = 0.0, cos_exit: float | None = None) -> FixedS
         return FixedSlice(_interpolate_eta(data["log_exitance"][:, _g_index(g)], eta, data["etas"])[..., None, :, :],
                           (1.0,))
     bins = _exit_bins(float(cos_exit))
-    table = np.moveaxis(data["log_radiance"][:, _g_index(g)], -1, 1)[:, [m for m, _ in bins]]  # (eta, bins, rho, a)
+    table = np.moveaxis(data["log_view_radiance"][:, _g_index(g)], -1, 1)[:, [m for m, _ in bins]]  # (eta, bins, rho, a)
     return FixedSlice(_interpolate_eta(table, eta, data["etas"]), tuple(float(w) for _, w in bins))
 
 
@@ -524,20 +586,32 @@ def _table_relative_variance(cells, parts, area):
 
 @functools.lru_cache(maxsize=None)
 def _noise_tables():
-    """Relative variances of the shipped cells: ``radiance`` (eta, g, mu, rho, a) per exit-angle
-    bin, ``exitance`` (eta, g, 1, rho, a) of the cells summed over exit angles."""
+    r"""Relative variances of the shipped cells: ``view`` (eta, g, view, rho, a) of the radiance
+    toward each view direction, ``exitance`` (eta, g, 1, rho, a) of the cells summed over exit
+    angles.
+
+    A view's cell is the cones' late part, mixed with weights :math:`W_{km}`, plus the view
+    walk's early part, two independent walks: :math:`\mathrm{Var} = \sum_m W_{km}^2
+    \mathrm{Var}(\ell_m) + \mathrm{Var}_\mathrm{view}`, the late part's from the identity
+    (a plain walk's paths), the view walk's from the spread of its batches."""
     data = _tables()
     cells = data["exitance"].astype(np.float64)                          # (eta, g, rho, a, mu)
     area = np.pi * np.diff(data["rho_edges"] ** 2)
-    parts = ([data[key].astype(np.float64) for key in ("early_exitance", "early_second", "own_exitance")]
-             if "early_exitance" in data else None)
-
-    def relative(arrange):  # every array arranged alike; a summed cell's second moment is its bins' sum
-        return _table_relative_variance(arrange(cells), None if parts is None else [arrange(p) for p in parts], area)
-
-    per_bin = relative(lambda x: np.moveaxis(x, -1, 2))   # a photon leaves into one exit-angle bin
-    summed = relative(lambda x: x.sum(-1)[:, :, None])
-    return {"radiance": per_bin, "exitance": summed}
+    parts = [data[key].astype(np.float64) for key in ("early_exitance", "early_second", "own_exitance")]
+    summed = _table_relative_variance(cells.sum(-1)[:, :, None], [p.sum(-1)[:, :, None] for p in parts], area)
+    late = _late_radiance(data)                                          # (eta, g, rho, a, mu)
+    weights = _late_view_weights(data, late)                             # (eta, g, a, view, mu)
+    late = np.moveaxis(late, -1, 2)                                      # (eta, g, mu, rho, a)
+    late_variance = cell_relative_variance(late, data["absorption"], area, data["photons"]) * late**2
+    value = np.einsum("egakm,egmra->egkra", weights, late) + data["view_radiance"].astype(np.float64)
+    variance = (np.einsum("egakm,egmra->egkra", weights**2, late_variance)
+                + data["view_variance"].astype(np.float64))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        relative = np.clip(np.nan_to_num(variance / value**2, nan=1.0, posinf=1.0), 0.0, 1.0)
+    # A cell without light, or whose variance underflowed float32 (a' of hundreds, 1e-45): no
+    # information, a single photon's relative variance.
+    relative = np.where((value > 0) & (variance > 0), relative, 1.0)
+    return {"view": relative, "exitance": summed}
 
 
 def noise_slice(eta, *, g: float = 0.0, cos_exit: float | None = None) -> FixedSlice:
@@ -555,7 +629,7 @@ def noise_slice(eta, *, g: float = 0.0, cos_exit: float | None = None) -> FixedS
     if cos_exit is None:
         table, bins = _noise_tables()["exitance"][:, _g_index(g)], [0]
     else:
-        table, bins = _noise_tables()["radiance"][:, _g_index(g)], [m for m, _ in _exit_bins(float(cos_exit))]
+        table, bins = _noise_tables()["view"][:, _g_index(g)], [m for m, _ in _exit_bins(float(cos_exit))]
     mixed = np.sum(table[:, bins][index] * (weight**2).reshape(weight.shape + (1, 1, 1)), axis=eta.ndim)
     return FixedSlice(jnp.asarray(np.log(np.maximum(mixed, 1e-300)), as_float_array(eta).dtype),
                       fixed_slice(eta, g=g, cos_exit=cos_exit).bin_weights)

@@ -1,0 +1,80 @@
+"""The radiance toward a camera's exact direction (issue 37), against a walk that shares no code
+with the tables.
+
+The truth is :func:`measure.synth_transport.camera_walk`: NumPy, absorption in the walk,
+next-event estimates toward one fixed direction (see its docstring); the tables' view part is
+:mod:`jsss.transport.view_walk` (a white walk, absorption by Laplace transform, a random view
+azimuth per collision) joined to the cones' late part. The user's call: ``transport.radiance``
+with its defaults, at eta 1.3 (a table node) and the camera's cosine.
+"""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from jsss import Medium, transport
+from jsss.transport import profiles
+from measure.synth_transport import camera_walk, leaving_reflectance
+
+EDGES = np.array([0.02, 0.05, 0.1, 0.2, 0.4, 0.8, 1.6, 3.2])  # mm; transport length 1 mm
+
+
+def _walk(sigma_a, g, view_deg, *, photons, seed, batches=8):
+    """Mean radiance over each annulus of EDGES [1/(mm^2 sr)] and its standard error."""
+    rng = np.random.default_rng(seed)
+    area = np.pi * np.diff(EDGES**2)
+    means = []
+    for _ in range(batches):
+        tally = np.zeros(EDGES.size - 1)
+
+        def add(x, y, weight, tally=tally):
+            tally += np.histogram(np.hypot(x, y), EDGES, weights=weight)[0]
+
+        camera_walk(sigma_a, 1.0, 1.3, g, view_deg, photons=photons // batches, rng=rng, tally=add)
+        means.append(tally / (photons // batches * area))
+    means = np.asarray(means)
+    return means.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(batches)
+
+
+def _model(sigma_a, g, view_deg):
+    """transport.radiance averaged over each annulus (area-weighted, 16 radii each)."""
+    r = np.stack([np.sqrt(np.linspace(a**2, b**2, 33)[1::2]) for a, b in itertools.pairwise(EDGES)])
+    return np.asarray(transport.radiance(Medium(sigma_a, 1.0, 1.3), r, np.cos(np.radians(view_deg)), g=g)).mean(-1)
+
+
+def test_the_independent_walks_fresnel_is_jsss_fresnel():
+    """The truth's boundary (angle form) against jsss's (cosine form): the same law, two codes."""
+    from jsss.fresnel import fresnel_reflectance
+
+    mu = np.linspace(0.0, 1.0, 201)
+    for eta in (1.0, 1.3, 1.6):
+        np.testing.assert_allclose(leaving_reflectance(mu, eta), np.asarray(fresnel_reflectance(mu, 1 / eta)),
+                                   atol=1e-12)
+
+
+@pytest.mark.parametrize("sigma_a, g, view_deg", [(0.5, 0.0, 0.0), (0.5, 0.0, 40.0), (0.05, 0.0, 0.0),
+                                                  (0.05, 0.5, 40.0), (5.0, 0.0, 0.0)])
+def test_radiance_toward_the_exact_direction_matches_an_independent_walk(sigma_a, g, view_deg):
+    """Within 0.02-3.2 transport lengths of the beam, albedo' 0.95-0.17, at 0 and 40 degrees:
+    every annulus the walk resolves (its standard error under 10 %) within 3 % plus 3 standard
+    errors of the walk and the tables together. Measured (2026-12-06): within 2.7 %, most
+    within 1 %. With the cones alone (the tables before), toward the normal at albedo' 0.67 the
+    annuli read +594, +328, +125, +27, +3 % from 0.02 to 0.8 transport lengths (single
+    scattering reaching the cone's slant paths); at 40 degrees they were within 2.2 %."""
+    walk, walk_error = _walk(sigma_a, g, view_deg, photons=400_000, seed=11)
+    model = _model(sigma_a, g, view_deg)
+    # The tables' own error at each annulus: the view cell's, at the nearest absorption node.
+    data = profiles._tables()
+    noise = profiles._noise_tables()["view"][int(np.flatnonzero(np.isclose(data["etas"], 1.3))[0]),
+                                            profiles._g_index(g)]
+    view = round(view_deg / 10)
+    node = int(np.argmin(abs(np.log(np.maximum(data["absorption"], 1e-300) / sigma_a))))
+    centres = np.sqrt(EDGES[:-1] * EDGES[1:])
+    cells = np.clip(np.searchsorted(data["rho_edges"], centres) - 1, 0, None)
+    table_error = np.sqrt(noise[view, cells, node]) * model
+    resolved = walk_error < 0.1 * walk
+    assert resolved.sum() >= 5
+    deviation = (model / walk - 1)[resolved]
+    allowed = (0.03 + 3 * np.hypot(walk_error, table_error) / walk)[resolved]
+    assert np.all(abs(deviation) < allowed), (deviation.round(3), allowed.round(3))
