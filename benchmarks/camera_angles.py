@@ -24,10 +24,8 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import os
 import sys
-import time
 
 import jax
 
@@ -37,8 +35,10 @@ import numpy as np
 from jsss import hankel
 from jsss.materials import material
 from measure.pipeline import fit_measurement
-from measure.synth import SyntheticMeasurement
-from measure.synth_transport import pixel_beam_reference, synthesize_walk
+from measure.synth_transport import synthesize_walk
+
+sys.path.insert(0, os.path.dirname(__file__))
+from measurement_transport import cached_image  # noqa: E402
 
 VIEWS = (0.0, 40.0)
 SIZE = 256
@@ -63,21 +63,8 @@ def _image(name, medium, g, view, *, photons, seed, cache):
     if cache:
         os.makedirs(cache, exist_ok=True)
         path = os.path.join(cache, f"{name.replace(', ', '_').replace(' ', '')}_view{view:g}_p{photons}_s{seed}.npz")
-        if os.path.exists(path):
-            with np.load(path) as stored:
-                truth = json.loads(str(stored["truth"]))
-                reference = pixel_beam_reference(SIZE, truth["center"], pixel_mm, pixel_mm, channels=3,
-                                                 reflectance=truth["reference_reflectance"])
-                return SyntheticMeasurement(stored["measurement"], reference, None, truth=truth), float(stored["seconds"])
-    start = time.perf_counter()
-    image = synthesize_walk(medium, g=g, photons=photons, pixel_mm=pixel_mm, size=SIZE, beam_sigma_mm=pixel_mm,
-                            view_deg=view, seed=seed)
-    seconds = time.perf_counter() - start
-    if path:
-        partial = path + f".{os.getpid()}.tmp.npz"
-        np.savez(partial, measurement=image.measurement, truth=json.dumps(image.truth), seconds=seconds)
-        os.replace(partial, path)
-    return image, seconds
+    return cached_image(path, lambda: synthesize_walk(medium, g=g, photons=photons, pixel_mm=pixel_mm, size=SIZE,
+                                                      beam_sigma_mm=pixel_mm, view_deg=view, seed=seed))
 
 
 def main():

@@ -64,6 +64,27 @@ def _geometry(albedo, *, field, pixel_mm, size):
     return max(0.05, field / sigma_tr / (size / 2))
 
 
+def cached_image(path, make):
+    """``make()``'s walk image, or the one stored at ``path`` (npz; None: no cache), and the
+    seconds its walk took. The reference is rebuilt from the stored truth, not read: it is cheap,
+    and this keeps a cache written before the references were integrated over pixels (2026-12-02)
+    valid. Written atomically, so two processes may fill one cache."""
+    if path and os.path.exists(path):
+        with np.load(path) as stored:
+            truth = json.loads(str(stored["truth"]))
+            reference = pixel_beam_reference(truth["size"], truth["center"], truth["pixel_mm"], truth["beam_sigma_mm"],
+                                             channels=len(truth["eta"]), reflectance=truth["reference_reflectance"])
+            return SyntheticMeasurement(stored["measurement"], reference, None, truth=truth), float(stored["seconds"])
+    start = time.perf_counter()
+    image = make()
+    seconds = time.perf_counter() - start
+    if path:
+        partial = path + f".{os.getpid()}.tmp.npz"
+        np.savez(partial, measurement=image.measurement, truth=json.dumps(image.truth), seconds=seconds)
+        os.replace(partial, path)
+    return image, seconds
+
+
 def _image(medium, *, g, photons, cone, pixel_mm, size, seed, cache):
     """One walk image, from ``cache`` when it holds one with these parameters."""
     key = dict(sigma_a=float(medium.sigma_a), sigma_s_prime=float(medium.sigma_s_prime), eta=float(medium.eta),
@@ -73,26 +94,9 @@ def _image(medium, *, g, photons, cone, pixel_mm, size, seed, cache):
     path = None
     if cache:
         os.makedirs(cache, exist_ok=True)
-        name = "_".join(f"{k}{v}" for k, v in key.items())
-        path = os.path.join(cache, name + ".npz")
-        if os.path.exists(path):
-            with np.load(path) as stored:
-                truth = json.loads(str(stored["truth"]))
-                # The reference is rebuilt, not read: it is cheap, and this keeps a cache
-                # written before the references were integrated over pixels (2026-12-02) valid.
-                reference = pixel_beam_reference(truth["size"], truth["center"], truth["pixel_mm"],
-                                                 truth["beam_sigma_mm"], reflectance=truth["reference_reflectance"])
-                image = SyntheticMeasurement(stored["measurement"], reference, None, truth=truth)
-                return image, float(stored["seconds"])
-    start = time.perf_counter()
-    image = synthesize_walk(medium, g=g, photons=photons, cone_deg=cone, seed=seed, pixel_mm=pixel_mm, size=size,
-                            beam_sigma_mm=pixel_mm)
-    seconds = time.perf_counter() - start
-    if path:
-        partial = path + f".{os.getpid()}.tmp.npz"
-        np.savez(partial, measurement=image.measurement, truth=json.dumps(image.truth), seconds=seconds)
-        os.replace(partial, path)
-    return image, seconds
+        path = os.path.join(cache, "_".join(f"{k}{v}" for k, v in key.items()) + ".npz")
+    return cached_image(path, lambda: synthesize_walk(medium, g=g, photons=photons, cone_deg=cone, seed=seed,
+                                                      pixel_mm=pixel_mm, size=size, beam_sigma_mm=pixel_mm))
 
 
 def main():
