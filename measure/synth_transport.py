@@ -87,12 +87,12 @@ def camera_walk(sigma_a, sigma_s_prime, eta, g, view_deg, *, photons, rng, tally
     The medium fills :math:`z < 0`; photons enter at the origin (plus a Gaussian offset of
     ``entry_sigma_mm`` per axis, one per photon) going down. The camera looks from outside at
     ``view_deg`` to the normal, in the x-z plane; inside, its direction :math:`\omega` makes
-    :math:`	heta_i` with the normal, :math:`\sin	heta_i = \sin	heta_o/\eta`. The radiance it
+    :math:`\theta_i` with the normal, :math:`\sin\theta_i = \sin\theta_o/\eta`. The radiance it
     records, integrated over a patch of the surface, is a volume integral over the collisions,
     so each collision at depth :math:`z` adds
 
-    .. math:: c = rac{\sigma_s}{\sigma_t}\, p(\mathbf u\cdot\omega)\,
-                 rac{e^{-\sigma_t z/\cos	heta_i}}{\cos	heta_i}\, rac{1 - R(	heta_i)}{\eta^2}
+    .. math:: c = \frac{\sigma_s}{\sigma_t}\, p(\mathbf u\cdot\omega)\,
+                 \frac{e^{-\sigma_t z/\cos\theta_i}}{\cos\theta_i}\, \frac{1 - R(\theta_i)}{\eta^2}
 
     (``u`` the direction before the collision; :math:`L/n^2` is conserved across the boundary)
     at the point where its straight path along :math:`\omega` meets the surface.
