@@ -98,18 +98,6 @@ def _centre_values(log_cells, axis, log_step):
     return np.moveaxis(out, -1, axis)
 
 
-def _cone_weights(mu_nodes, cos_exit):
-    """(len(cos_exit), n_mu): each cosine's weights on the exit-angle bins, linear in mu between
-    their centres and all on the outermost one beyond them."""
-    position = np.interp(np.asarray(cos_exit, float), mu_nodes, np.arange(mu_nodes.size))
-    lower = np.minimum(np.floor(position).astype(int), mu_nodes.size - 2)
-    t = position - lower
-    weights = np.zeros((position.size, mu_nodes.size))
-    np.put_along_axis(weights, lower[:, None], (1 - t)[:, None], axis=1)
-    np.put_along_axis(weights, lower[:, None] + 1, t[:, None], axis=1)
-    return weights
-
-
 def _late_radiance(data):
     """The cones' late part as radiance, (eta, g, rho, a, mu): each shipped cell less its early
     blend ``w new + (1 - w) own`` (the paths whose last collision lies within the early cap),
@@ -130,7 +118,10 @@ def _late_view_weights(data, late):
     slope read +0.5 to +1.7 % at 0 degrees, g 0, eta 1.3; pooled it is +0.3 %). At 80 degrees
     the light falls toward grazing: -11 %."""
     nodes = data["mu_nodes"]
-    base = _cone_weights(nodes, data["view_cos"])                          # (view, mu)
+    base = np.zeros((data["view_cos"].size, nodes.size))                  # (view, mu): as a cone camera mixes them
+    for k, mu in enumerate(data["view_cos"]):
+        for m, w in _exit_bins(float(mu)):
+            base[k, m] = w
     area = np.pi * np.diff(data["rho_edges"] ** 2)
     pooled = np.einsum("egram,r->egam", late, area)                         # (eta, g, a, mu)
     weights = np.broadcast_to(base, pooled.shape[:3] + base.shape).copy()
@@ -154,8 +145,8 @@ class _Tables(dict):
 
     ``log_radiance`` (eta, g, rho, a, mu): the radiance averaged over each exit cone (the
     default). ``log_view_radiance`` (eta, g, rho, a, view): the radiance toward each exact view
-    direction (``view_cos``; issue 37; ``exact=True``). Its early part, the paths whose last collision lies within the
-    early cap, is the walk's next-event estimates toward that direction (``view_radiance``,
+    direction (``view_cos``; issue 37; ``exact=True``). Its early part, the paths whose last
+    collision lies within the early cap, is the walk's next-event estimates toward that direction (``view_radiance``,
     :mod:`jsss.transport.view_walk`); its late part is the cones' late part, linear in mu between
     their centres: light that has travelled more than four transport lengths is diffuse, and
     its angular dependence is smooth."""
@@ -601,19 +592,29 @@ def _table_relative_variance(cells, parts, area):
 
 @functools.lru_cache(maxsize=None)
 def _noise_tables():
-    r"""Relative variances of the shipped cells: ``radiance`` (eta, g, mu, rho, a) per exit cone,
-    ``view`` (eta, g, view, rho, a) of the radiance toward each view direction, ``exitance`` (eta, g, 1, rho, a) of the cells summed over exit
-    angles.
+    """Relative variances of the shipped cells: ``radiance`` (eta, g, mu, rho, a) per exit-angle
+    bin, ``exitance`` (eta, g, 1, rho, a) of the cells summed over exit angles."""
+    data = _tables()
+    cells = data["exitance"].astype(np.float64)                          # (eta, g, rho, a, mu)
+    area = np.pi * np.diff(data["rho_edges"] ** 2)
+    parts = [data[key].astype(np.float64) for key in ("early_exitance", "early_second", "own_exitance")]
+    # A photon leaves into one exit-angle bin: a summed cell's second moment is its bins' sum.
+    per_bin = _table_relative_variance(np.moveaxis(cells, -1, 2), [np.moveaxis(p, -1, 2) for p in parts], area)
+    summed = _table_relative_variance(cells.sum(-1)[:, :, None], [p.sum(-1)[:, :, None] for p in parts], area)
+    return {"radiance": per_bin, "exitance": summed}
+
+
+@functools.lru_cache(maxsize=None)
+def _view_noise_table():
+    r"""Relative variances (eta, g, view, rho, a) of the radiance toward each exact view direction
+    (``exact=True``; built only when asked for, not by the default fits).
 
     A view's cell is the cones' late part, mixed with weights :math:`W_{km}`, plus the view
     walk's early part, two independent walks: :math:`\mathrm{Var} = \sum_m W_{km}^2
     \mathrm{Var}(\ell_m) + \mathrm{Var}_\mathrm{view}`, the late part's from the identity
     (a plain walk's paths), the view walk's from the spread of its batches."""
     data = _tables()
-    cells = data["exitance"].astype(np.float64)                          # (eta, g, rho, a, mu)
     area = np.pi * np.diff(data["rho_edges"] ** 2)
-    parts = [data[key].astype(np.float64) for key in ("early_exitance", "early_second", "own_exitance")]
-    summed = _table_relative_variance(cells.sum(-1)[:, :, None], [p.sum(-1)[:, :, None] for p in parts], area)
     late = _late_radiance(data)                                          # (eta, g, rho, a, mu)
     weights = _late_view_weights(data, late)                             # (eta, g, a, view, mu)
     late = np.moveaxis(late, -1, 2)                                      # (eta, g, mu, rho, a)
@@ -625,9 +626,7 @@ def _noise_tables():
         relative = np.clip(np.nan_to_num(variance / value**2, nan=1.0, posinf=1.0), 0.0, 1.0)
     # A cell without light, or whose variance underflowed float32 (a' of hundreds, 1e-45): no
     # information, a single photon's relative variance.
-    relative = np.where((value > 0) & (variance > 0), relative, 1.0)
-    per_bin = _table_relative_variance(np.moveaxis(cells, -1, 2), [np.moveaxis(p, -1, 2) for p in parts], area)
-    return {"radiance": per_bin, "view": relative, "exitance": summed}
+    return np.where((value > 0) & (variance > 0), relative, 1.0)
 
 
 def noise_slice(eta, *, g: float = 0.0, cos_exit: float | None = None, exact: bool = False) -> FixedSlice:
@@ -645,7 +644,7 @@ def noise_slice(eta, *, g: float = 0.0, cos_exit: float | None = None, exact: bo
     if cos_exit is None:
         table, bins = _noise_tables()["exitance"][:, _g_index(g)], [0]
     else:
-        table = _noise_tables()["view" if exact else "radiance"][:, _g_index(g)]
+        table = (_view_noise_table() if exact else _noise_tables()["radiance"])[:, _g_index(g)]
         bins = [m for m, _ in _exit_bins(float(cos_exit), exact)]
     mixed = np.sum(table[:, bins][index] * (weight**2).reshape(weight.shape + (1, 1, 1)), axis=eta.ndim)
     return FixedSlice(jnp.asarray(np.log(np.maximum(mixed, 1e-300)), as_float_array(eta).dtype),

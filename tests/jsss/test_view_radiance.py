@@ -69,7 +69,7 @@ def test_radiance_toward_the_exact_direction_matches_an_independent_walk(sigma_a
     model = _model(sigma_a, g, view_deg)
     # The tables' own error at each annulus: the view cell's, at the nearest absorption node.
     data = profiles._tables()
-    noise = profiles._noise_tables()["view"][int(np.flatnonzero(np.isclose(data["etas"], 1.3))[0]),
+    noise = profiles._view_noise_table()[int(np.flatnonzero(np.isclose(data["etas"], 1.3))[0]),
                                             profiles._g_index(g)]
     view = round(view_deg / 10)
     node = int(np.argmin(abs(np.log(np.maximum(data["absorption"], 1e-300) / sigma_a))))
