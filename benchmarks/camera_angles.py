@@ -9,10 +9,7 @@ scattering). Each image is 256 px on the sample plane, its half-field four diffu
 the medium's most penetrating channel, the beam one pixel wide (standard deviation), three
 channels. Fit: :func:`measure.pipeline.fit_measurement` as ``fit-params`` runs it, model
 transport, the image's view angle and g given (``--view-angle``, ``--g``), everything else
-default. The table in ``docs/benchmarks/camera_angles.md`` (2026-12-06) was measured while the
-fit read the tables' exact view directions (commit 18ebd35); they are opt-in since
-(``transport.radiance(..., exact=True)``), and the fit's default radiance is the cones' average
-again, so a rerun measures that.
+default.
 
 Per channel: relative error and z = (estimate - truth) / stated error of sigma_a and
 sigma_s', chi^2/dof and the fit's status. The issue's target: every parameter within 3 %;

@@ -2,10 +2,9 @@
 
 Images: :func:`measure.synth_transport.synthesize_walk` (own random walks with absorption in
 the walk and their own seeds, not the tables; one channel; transport length 1 mm). The
-camera accepts a jsss walk's photons within ``--cone`` degrees of the normal (default 20.7, the
-tables' top exit cone, which the fit's default radiance averages); ``--cone 0`` looks from
-exactly 0 degrees instead (next-event estimates of an independent walk,
-:func:`measure.synth_transport.camera_walk`). Models, each on the
+camera looks from exactly 0 degrees (next-event estimates of an independent walk,
+:func:`measure.synth_transport.camera_walk`, since 2026-12-06); ``--cone 20.7`` instead accepts
+a jsss walk's photons within that angle of the normal, as the tables held before. Models, each on the
 same image, all reading the image as a camera's radiance at 0 degrees (the contract):
 ``dipole`` (diffusion exit law) and ``transport`` (scaled Monte Carlo tables); and, to show
 what the contract fixes, ``transport`` reading the image as exitance.
@@ -103,9 +102,7 @@ def _image(medium, *, g, photons, cone, pixel_mm, size, seed, cache):
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--photons", type=int, default=None, help="photons per image (default: per albedo, above)")
-    parser.add_argument("--cone", type=float, default=float(np.degrees(np.arccos(np.sqrt(0.875)))),
-                        help="the camera's acceptance cone [degrees] (default 20.7, the tables' top exit cone, which "
-                             "the fit's default radiance averages); 0 for the exact direction")
+    parser.add_argument("--cone", type=float, default=None, help="a cone camera [degrees] instead of the exact direction")
     parser.add_argument("--field", type=float, default=4.0, help="half-width of the image in diffusion lengths")
     parser.add_argument("--size", type=int, default=256, help="image side [pixels]")
     parser.add_argument("--pixel-mm", type=float, default=None, help="fixed pixel size (overrides --field)")
@@ -119,7 +116,7 @@ def main():
     if args.quick:
         args.albedos, args.etas, args.gs, args.photons = [0.9, 0.99], [1.3], [0.0], args.photons or 300_000
     grid = hankel.hankel_grid()
-    camera = "exact 0 deg" if not args.cone else f"cone {args.cone:.1f} deg"
+    camera = "exact 0 deg" if args.cone is None else f"cone {args.cone:.1f} deg"
     print(f"# fit-params on walk camera images ({datetime.date.today().isoformat()}, {camera}, "
           f"{args.size} px, half-field {args.field} diffusion lengths)")
     print("| albedo' | eta | g | photons | pixel mm | model | reads as | sigma_a error (z) | sigma_s' error (z) "
@@ -129,7 +126,7 @@ def main():
         medium = Medium(1 - albedo, albedo, eta)
         photons = args.photons or (PHOTONS_G09_HIGH if albedo >= 0.999 and g > 0 else PHOTONS[albedo])
         pixel_mm = _geometry(albedo, field=args.field, pixel_mm=args.pixel_mm, size=args.size)
-        image, walk_s = _image(medium, g=g, photons=photons, cone=args.cone or None, pixel_mm=pixel_mm, size=args.size,
+        image, walk_s = _image(medium, g=g, photons=photons, cone=args.cone, pixel_mm=pixel_mm, size=args.size,
                                seed=7, cache=args.cache)
         if args.walk_only:
             print(f"<!-- albedo' {albedo} eta {eta} g {g}: walk {walk_s:.0f} s -->", flush=True)

@@ -1,8 +1,9 @@
 """Do the transport fit's stated errors hold once the tables' own noise is in them? z over many truths.
 
-Truth: :func:`measure.synth_transport.synthesize_walk` (own random walks with absorption in the
+Truth: :func:`measure.synth_transport.synthesize_walk` (an independent walk with absorption in the
 walk, each truth its own seed; not the tables), one channel, transport length 1 mm, a camera
-accepting light within 20.7 degrees of the normal (the tables' top exit-angle bin), 256 px framing
+looking from exactly 0 degrees (next-event estimates; before 2026-12-06 a cone of 20.7 degrees, the
+tables' top exit-angle bin, as the tables then held), 256 px framing
 4 diffusion lengths each side (pixels of at least 0.05 mm), a Gaussian beam one pixel wide, as
 ``benchmarks/measurement_transport.py``. Truths: reduced albedo x eta x g (eta 1.33 and 1.45 lie
 between the tables' nodes, so their slices mix four independent tables). Every image is fitted
@@ -41,7 +42,6 @@ from measure.pipeline import fit_measurement  # noqa: E402
 ALBEDOS = (0.3, 0.5, 0.7, 0.85)
 ETAS = (1.0, 1.33, 1.45)
 GS = (0.0, 0.5)
-CONE = float(np.degrees(np.arccos(np.sqrt(0.875))))  # 20.7 degrees: the tables' top exit-angle bin
 
 
 RADII = ((0, 0.1), (0.1, 1), (1, 10), (10, np.inf))  # transport lengths: where the table's share comes from
@@ -95,7 +95,7 @@ def main():
     for n, (albedo, eta, g) in enumerate(itertools.product(ALBEDOS, ETAS, GS)):
         medium = Medium(1 - albedo, albedo, eta)
         pixel_mm = _geometry(albedo, field=4.0, pixel_mm=None, size=256)
-        image, walk_s = _image(medium, g=g, photons=args.photons, cone=CONE, pixel_mm=pixel_mm, size=256,
+        image, walk_s = _image(medium, g=g, photons=args.photons, cone=None, pixel_mm=pixel_mm, size=256,
                                seed=100 + n, cache=args.cache)
         start = time.perf_counter()
         table = fit_measurement(image.measurement, image.reference, pixel_mm, eta, model="transport", g=g,
@@ -132,7 +132,8 @@ def main():
         "",
         f"Truth: `measure.synth_transport.synthesize_walk`, {n_truths} independent truths (own random walks with "
         f"absorption in the walk, {args.photons:.1e} photons each, seeds 100-{99 + n_truths}; not the tables), one "
-        "channel, transport length 1 mm, camera cone 20.7 degrees, 256 px framing 4 diffusion lengths each side, "
+        "channel, transport length 1 mm, camera at exactly 0 degrees (next-event estimates), 256 px framing 4 "
+        "diffusion lengths each side, "
         "beam one pixel wide. Fits: `fit_measurement` defaults, `model=\"transport\"`, radiance at 0 degrees. "
         f"Tables: {int(info['photons']):.1e} photons per (eta, g), and {_early(info)}, "
         f"`jsss/data/transport_tables.npz` {size_mb:.1f} MB.",

@@ -26,8 +26,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["covariance", "error_scale", "reduced_chi2", "standard_errors"]
+__all__ = ["POOR_FIT_CHI2", "covariance", "error_scale", "reduced_chi2", "standard_errors"]
 
+# A chi^2/dof above this is more than the noise explains: the fit is called poor
+# (measure.checks.fit_quality) and fit_medium first solves it again from every start.
+POOR_FIT_CHI2 = 4.0
 NULL_EIGENVALUE = 1e-12  # eigenvalues of J^T J below this share of the largest are directions the data do not see
 
 

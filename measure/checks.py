@@ -59,6 +59,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from fitting.statistics import POOR_FIT_CHI2
+
 from .profile import beam_sigma, half_max_radius_px
 
 __all__ = [
@@ -79,7 +81,6 @@ __all__ = [
 BEAM_MIN_FRACTION = 0.9
 MIN_WIDTH_RATIO = 0.8
 MIN_SIGNAL_TO_NOISE = 5.0
-POOR_FIT_CHI2 = 4.0
 NOT_A_RESULT_CHI2 = 100.0
 MIN_FIELD_DIFFUSION_LENGTHS = 2.0
 LOOSE_SIGMA_A = 0.1

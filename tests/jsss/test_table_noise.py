@@ -127,18 +127,31 @@ def test_a_model_value_at_a_node_carries_its_cells_error_and_eta_mixes_tables_in
     weights squared."""
     data = profiles._tables()
     grid, j = TableGrid(), profiles._g_index(0.5)
-    key = "exitance" if cos_exit is None else "radiance"
-    bin_ = 0 if cos_exit is None else profiles._exit_bins(cos_exit)[0][0]
     raw = data["exitance"][:, j].astype(float)                                  # (eta, rho, a, mu)
     early, second, own = (data[key][:, j].astype(float) for key in ("early_exitance", "early_second", "own_exitance"))
     if cos_exit is None:
-        raw, early, second, own = (x.sum(-1, keepdims=True) for x in (raw, early, second, own))
-    cells = profiles.split_relative_variance(np.moveaxis(raw, -1, 1), np.moveaxis(early, -1, 1), grid.absorption,
-                                             grid.annulus_area, int(data["photons"]), int(data["early_photons"]),
-                                             np.moveaxis(second, -1, 1), own=np.moveaxis(own, -1, 1),
-                                             weight=data["early_weight"][:, j, None, None, :])
-    cells = cells[:, 0 if cos_exit is None else bin_]                            # (eta, rho, a)
-    np.testing.assert_allclose(profiles._noise_tables()[key][:, j][:, 0 if cos_exit is None else bin_], cells)
+        raw, early, second, own = (x.sum(-1, keepdims=True)[:, None, ..., 0] for x in (raw, early, second, own))
+        cells = profiles.split_relative_variance(raw, early, grid.absorption, grid.annulus_area, int(data["photons"]),
+                                                 int(data["early_photons"]), second, own=own,
+                                                 weight=data["early_weight"][:, j, None, None, :])[:, 0]
+        shipped = profiles._noise_tables()["exitance"][:, j, 0]
+    else:
+        # Toward the normal: the top cone's late part (the cell less its early blend), carried
+        # past the cone's centre by the pooled slope, and the view walk's early part:
+        # independent walks, their variances added.
+        assert profiles._exit_bins(cos_exit, exact=True) == [(0, 1.0)]
+        w = data["early_weight"][:, j, None, :]
+        late = np.maximum(raw[..., -1] - (w * early[..., -1] + (1 - w) * own[..., -1]), 0.0)
+        factor = profiles._late_view_weights(data, profiles._late_radiance(data))[:, j, :, 0, -1]   # (eta, a)
+        assert np.all(abs(factor - 1) < 0.1)
+        late = factor[:, None, :] * late / (np.pi * (1 - data["mu_edges"][-2] ** 2))
+        view, view_variance = (data[key][:, j, 0].astype(float) for key in ("view_radiance", "view_variance"))
+        variance = profiles.cell_relative_variance(late / factor[:, None, :], grid.absorption, grid.annulus_area,
+                                                   int(data["photons"])) * late**2 + view_variance
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cells = np.where((late + view > 0) & (variance > 0), np.minimum(variance / (late + view) ** 2, 1.0), 1.0)
+        shipped = profiles._view_noise_table()[:, j, 0]
+    np.testing.assert_allclose(shipped, cells, rtol=1e-10)
     k, rho_index = 21, np.array([20, 30, 40])                                   # a' = 0.01; rho' 0.046, 0.32, 2.2
     centres = np.sqrt(grid.rho_edges[rho_index] * grid.rho_edges[rho_index + 1])
     medium = Medium(grid.absorption[k] * 2.0, 2.0, 1.3)
