@@ -143,13 +143,13 @@ class _Tables(dict):
     asks for totals (the planner's profile choice) does not pay 0.2-0.3 s of cold start to fill
     and centre 73 x 42 x 8 cells per eta and g.
 
-    ``log_radiance`` (eta, g, rho, a, mu): the radiance averaged over each exit cone (the
-    default). ``log_view_radiance`` (eta, g, rho, a, view): the radiance toward each exact view
-    direction (``view_cos``; issue 37; ``exact=True``). Its early part, the paths whose last
-    collision lies within the early cap, is the walk's next-event estimates toward that direction (``view_radiance``,
-    :mod:`jsss.transport.view_walk`); its late part is the cones' late part, linear in mu between
-    their centres: light that has travelled more than four transport lengths is diffuse, and
-    its angular dependence is smooth."""
+    ``log_view_radiance`` (eta, g, rho, a, view): the radiance toward each exact view direction
+    (``view_cos``; issue 37; ``exact=True``, the default). Its early part, the paths whose last
+    collision lies within the early cap, is the walk's next-event estimates toward that
+    direction (``view_radiance``, :mod:`jsss.transport.view_walk`); its late part is the cones'
+    late part, linear in mu between their centres: light that has travelled more than four
+    transport lengths is diffuse, and its angular dependence is smooth. ``log_radiance``
+    (eta, g, rho, a, mu): the radiance averaged over each exit cone (``exact=False``)."""
 
     def __missing__(self, key):
         if key not in ("log_exitance", "log_radiance", "log_view_radiance"):
@@ -308,8 +308,8 @@ def _radial(log_cells, rho, rho_edges):
     thousandth of a transport length that no camera resolves. A disc of constant value made the
     profile jump at its edge, and a fit's loss with it wherever a transform node crossed that
     edge as sigma_s' moved: on the exact views' noise-free ketchup image the loss rose and fell
-    tenfold between 1 % and the truth, and Gauss-Newton stopped there. Beyond the last node (rho' > 1e3) the end slope continues
-    in log-log, never rising."""
+    tenfold between 1 % and the truth, and Gauss-Newton stopped there. Beyond the last node
+    (rho' > 1e3) the end slope continues in log-log, never rising."""
     disc, log_nodes = log_cells[..., 0], log_cells[..., 1:]
     lo = np.log10(rho_edges[1])
     step = np.log10(rho_edges[2]) - lo

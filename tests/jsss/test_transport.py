@@ -300,8 +300,9 @@ def test_low_albedo_profile_keeps_its_light_near_the_source(channel):
     finite and joins the annuli continuously (a jump there once stalled fits); toward the normal
     it holds the beam's own single scattering (every collision on the beam's axis sends light
     along the normal to its entry point), a spike in angle that no interpolation between view
-    directions 10 degrees apart integrates, so the hemisphere is not checked there. Measured (2026-12-06): within 3.6 % at 0.03-0.3; red reads
-    -5.3 % at 0.01 and -7.3 % at 0.003 transport lengths, the spike's edge."""
+    directions 10 degrees apart integrates, so the hemisphere is not checked there. Measured
+    (2026-12-06): within 3.6 % at 0.03-0.3; red reads -5.3 % at 0.01 and -7.3 % at 0.003
+    transport lengths, the spike's edge."""
     from jsss.materials import jensen2001
 
     k = jensen2001("ketchup")

@@ -61,9 +61,10 @@ def test_radiance_toward_the_exact_direction_matches_an_independent_walk(sigma_a
     """Within 0.02-3.2 transport lengths of the beam, albedo' 0.95-0.17, at 0 and 40 degrees:
     every annulus the walk resolves (its standard error under 10 %) within 3 % plus 3 standard
     errors of the walk and the tables together. Measured (2026-12-06): within 2.7 %, most
-    within 1 %. The cones' average (``exact=False``, the default before 2026-12-06), toward the normal at albedo'
-    0.67, reads +594, +328, +125, +27, +3 % from 0.02 to 0.8 transport lengths (single
-    scattering reaching the cone's slant paths), checked below; at 40 degrees within 2.2 %."""
+    within 1 %. The cones' average (``exact=False``, the default before 2026-12-06), toward
+    the normal at albedo' 0.67, reads +594, +328, +125, +27, +3 % from 0.02 to 0.8 transport
+    lengths (single scattering reaching the cone's slant paths), checked below; at 40 degrees
+    within 2.2 %."""
     walk, walk_error = _walk(sigma_a, g, view_deg, photons=400_000, seed=11)
     model = _model(sigma_a, g, view_deg)
     # The tables' own error at each annulus: the view cell's, at the nearest absorption node.
