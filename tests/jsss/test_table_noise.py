@@ -137,17 +137,19 @@ def test_a_model_value_at_a_node_carries_its_cells_error_and_eta_mixes_tables_in
         shipped = profiles._noise_tables()["exitance"][:, j, 0]
     else:
         # Toward the normal: the top cone's late part (the cell less its early blend), carried
-        # past the cone's centre by the pooled slope, and the view walk's early part:
-        # independent walks, their variances added.
+        # past the cone's centre by its slope at that radius, and the view walk's early part:
+        # independent walks, their variances added, with the slope's own noise (``extra``).
         assert profiles._exit_bins(cos_exit, exact=True) == [(0, 1.0)]
         w = data["early_weight"][:, j, None, :]
         late = np.maximum(raw[..., -1] - (w * early[..., -1] + (1 - w) * own[..., -1]), 0.0)
-        factor = profiles._late_view_weights(data, profiles._late_radiance(data))[:, j, :, 0, -1]   # (eta, a)
-        assert np.all(abs(factor - 1) < 0.1)
-        late = factor[:, None, :] * late / (np.pi * (1 - data["mu_edges"][-2] ** 2))
+        late = late / (np.pi * (1 - data["mu_edges"][-2] ** 2))
+        [(top, factor)], extra = profiles._late_view_mix(data, profiles._late_radiance(data))[0]
+        factor, extra = factor[:, j], extra[:, j]                                  # (eta, rho, a)
+        assert top == 7 and np.all(abs(factor - 1) < 0.1)
         view, view_variance = (data[key][:, j, 0].astype(float) for key in ("view_radiance", "view_variance"))
-        variance = profiles.cell_relative_variance(late / factor[:, None, :], grid.absorption, grid.annulus_area,
-                                                   int(data["photons"])) * late**2 + view_variance
+        variance = (profiles.cell_relative_variance(late, grid.absorption, grid.annulus_area, int(data["photons"]))
+                    * (factor * late) ** 2 + extra * late**2 + view_variance)
+        late = factor * late
         with np.errstate(divide="ignore", invalid="ignore"):
             cells = np.where((late + view > 0) & (variance > 0), np.minimum(variance / (late + view) ** 2, 1.0), 1.0)
         shipped = profiles._view_noise_table()[:, j, 0]
