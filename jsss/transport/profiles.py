@@ -139,21 +139,30 @@ def _local_slope(log_cones, relative_variance, centres, *, width=2.0, degree=1):
     # Cut at four widths: far from any usable cell the sums stay 0 rather than underflowing.
     kernel = np.where(np.abs(offset) <= 4 * width, np.exp(-0.5 * (offset / width) ** 2), 0.0)
     powers = np.arange(degree + 1)
-    basis = offset[..., None] ** powers                                      # (i, j, p)
+    basis = offset ** powers[:, None, None]                                  # (p, i, j)
 
-    def moments(k, values):                                                  # (..., i, a, p, q)
-        return np.einsum("ij,ijp,ijq,...ja->...iapq", k, basis, basis, values)
+    def moments(k, values, pairs):
+        """sum_j k_ij b_p(i,j) [b_q(i,j)] values_(..., j, a): (..., i, a, p[, q]), as one matrix
+        product over j (an einsum of four operands took 0.5 s of each table's first use)."""
+        factors = basis[:, None] * basis[None, :] if pairs else basis        # (p, q, i, j) or (p, i, j)
+        lead = factors.ndim - 2
+        out = np.matmul((k * factors).reshape(-1, index.size), values)       # (..., p q i, a)
+        out = out.reshape(values.shape[:-2] + factors.shape[:-1] + values.shape[-1:])
+        first = values.ndim - 2
+        return np.moveaxis(out, list(range(first, first + lead)), list(range(-lead, 0)))
 
-    normal = moments(kernel, precision)
-    right = np.einsum("ij,ijp,...ja->...iap", kernel, basis, precision * cell_slope)
-    spread_moments = moments(kernel**2, precision)
+    normal = moments(kernel, precision, True)                                # (..., i, a, p, q)
+    right = moments(kernel, precision * cell_slope, False)                   # (..., i, a, p)
+    spread_moments = moments(kernel**2, precision, True)
     # s_i = e0' M^-1 r (M the weighted normal matrix), so its weights on the cells' slopes are
     # c_ij = e0' M^-1 basis_ij K_ij P_j. A row with too few usable cells in reach for the
     # polynomial (ill-conditioned M) keeps only its weighted mean.
     total = normal[..., 0, 0]
     diagonal = np.sqrt(np.maximum(np.diagonal(normal, axis1=-2, axis2=-1), 1e-300))
     with np.errstate(divide="ignore", invalid="ignore"):
-        good = (total > 0) & (np.linalg.cond(normal / (diagonal[..., :, None] * diagonal[..., None, :])) < 1e8)
+        # Its condition number from the eigenvalues (M is symmetric): under half an SVD's time.
+        eigen = np.abs(np.linalg.eigvalsh(normal / (diagonal[..., :, None] * diagonal[..., None, :])))
+        good = (total > 0) & (eigen.max(-1) < 1e8 * eigen.min(-1))
         row = np.linalg.inv(np.where(good[..., None, None], normal, np.eye(degree + 1)))[..., 0, :]
         mean_row = np.where(total > 0, 1.0 / total, 0.0)[..., None] * (powers == 0)
     row = np.where(good[..., None], row, mean_row)
@@ -163,8 +172,27 @@ def _local_slope(log_cones, relative_variance, centres, *, width=2.0, degree=1):
     return slope, covariance, variance
 
 
-def _late_view_mix(data, late):
-    r"""Per view direction, the cones' late part that makes it: a list over views of
+def _late_relative_variance(data, late):
+    """Relative variances of the cones' late part (its cells a plain walk's tally), as ``late``
+    (eta, g, rho, a, mu)."""
+    area = np.pi * np.diff(data["rho_edges"] ** 2)
+    moved = np.moveaxis(late, -1, 2)                                         # (eta, g, mu, rho, a)
+    return np.moveaxis(cell_relative_variance(moved, data["absorption"], area, data["photons"]), 2, -1)
+
+
+@functools.lru_cache(maxsize=None)
+def _late_parts():
+    """The cones' late part of the shipped tables, its relative variances and its mix toward the
+    view directions: built once for both the view radiance and its noise table."""
+    data = _tables()
+    late = _late_radiance(data)
+    variance = _late_relative_variance(data, late)
+    return late, variance, _late_view_mix(data, late, variance)
+
+
+def _late_view_mix(data, late, variance=None):
+    r"""Per view direction, the cones' late part that makes it (``variance``: the cells' relative
+    variances, :func:`_late_relative_variance` by default): a list over views of
     ``(pairs, extra)``, ``pairs`` a list of ``(mu bin, weight)``, each weight a number or an
     (eta, g, rho, a) array, and ``extra`` the variance the weights' own noise adds, relative to
     the outer cone's value squared (0 between the centres).
@@ -181,9 +209,7 @@ def _late_view_mix(data, late):
     + \Delta\mu^2\,\mathrm{Var}(s)`: ``extra`` is the last two terms (12-15 % of the cone's own
     variance where the late light is)."""
     nodes = data["mu_nodes"]
-    area = np.pi * np.diff(data["rho_edges"] ** 2)
-    moved = np.moveaxis(late, -1, 2)                                         # (eta, g, mu, rho, a)
-    variance = np.moveaxis(cell_relative_variance(moved, data["absorption"], area, data["photons"]), 2, -1)
+    variance = _late_relative_variance(data, late) if variance is None else variance
     with np.errstate(divide="ignore"):
         log_late = np.where(late > 0, np.log(np.where(late > 0, late, 1.0)), -np.inf)
     slopes = {}
@@ -242,8 +268,8 @@ class _Tables(dict):
             solid = np.pi * np.diff(self["mu_edges"] ** 2)                  # projected solid angle of each mu bin
             value = _centre_values(_log_filled(self["exitance"].astype(np.float64) / solid, axis=2), 2, log_step)
         else:                                                               # (eta, g, rho, a, view)
-            late = _late_radiance(self)
-            late = _late_views(_late_view_mix(self, late), late)            # (eta, g, rho, a, view)
+            late, _, mix = _late_parts()
+            late = _late_views(mix, late)                                   # (eta, g, rho, a, view)
             view = np.moveaxis(self["view_radiance"].astype(np.float64), 2, -1)
             value = _centre_values(_log_filled(late + view, axis=2), 2, log_step)
         self[key] = value
@@ -713,11 +739,8 @@ def _view_noise_table():
     adds to the variance as a cell's own (its correlation across neighbouring radii, which the
     slope's smoothing makes, is left out)."""
     data = _tables()
-    area = np.pi * np.diff(data["rho_edges"] ** 2)
-    late = _late_radiance(data)                                          # (eta, g, rho, a, mu)
-    mix = _late_view_mix(data, late)
-    late_variance = np.moveaxis(cell_relative_variance(np.moveaxis(late, -1, 2), data["absorption"], area,
-                                                       data["photons"]), 2, -1) * late**2
+    late, relative_variance, mix = _late_parts()                         # (eta, g, rho, a, mu)
+    late_variance = relative_variance * late**2
     value = np.moveaxis(_late_views(mix, late), -1, 2) + data["view_radiance"].astype(np.float64)
     variance = np.moveaxis(_late_views(mix, late, late_variance), -1, 2) + data["view_variance"].astype(np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -21,28 +21,29 @@ from measure.synth_transport import camera_walk, leaving_reflectance
 EDGES = np.array([0.02, 0.05, 0.1, 0.2, 0.4, 0.8, 1.6, 3.2])  # mm; transport length 1 mm
 
 
-def _walk(sigma_a, g, view_deg, *, photons, seed, batches=8):
-    """Mean radiance over each annulus of EDGES [1/(mm^2 sr)] and its standard error."""
+def _walk(sigma_a, g, view_deg, *, photons, seed, batches=8, eta=1.3, edges=EDGES):
+    """Mean radiance over each annulus of ``edges`` [1/(mm^2 sr)] and its standard error."""
     rng = np.random.default_rng(seed)
-    area = np.pi * np.diff(EDGES**2)
+    area = np.pi * np.diff(edges**2)
     means = []
     for _ in range(batches):
-        tally = np.zeros(EDGES.size - 1)
+        tally = np.zeros(edges.size - 1)
 
         def add(x, y, weight, tally=tally):
-            tally += np.histogram(np.hypot(x, y), EDGES, weights=weight)[0]
+            tally += np.histogram(np.hypot(x, y), edges, weights=weight)[0]
 
-        camera_walk(sigma_a, 1.0, 1.3, g, view_deg, photons=photons // batches, rng=rng, tally=add)
+        camera_walk(sigma_a, 1.0, eta, g, view_deg, photons=photons // batches, rng=rng, tally=add)
         means.append(tally / (photons // batches * area))
     means = np.asarray(means)
     return means.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(batches)
 
 
-def _model(sigma_a, g, view_deg):
-    """transport.radiance (its default: toward the exact direction) averaged over each annulus
+def _model(sigma_a, g, view_deg, *, eta=1.3, edges=EDGES, exact=True):
+    """transport.radiance (by default toward the exact direction) averaged over each annulus
     (area-weighted, 16 radii each)."""
-    r = np.stack([np.sqrt(np.linspace(a**2, b**2, 33)[1::2]) for a, b in itertools.pairwise(EDGES)])
-    return np.asarray(transport.radiance(Medium(sigma_a, 1.0, 1.3), r, np.cos(np.radians(view_deg)), g=g)).mean(-1)
+    r = np.stack([np.sqrt(np.linspace(a**2, b**2, 33)[1::2]) for a, b in itertools.pairwise(edges)])
+    return np.asarray(transport.radiance(Medium(sigma_a, 1.0, eta), r, np.cos(np.radians(view_deg)), g=g,
+                                         exact=exact)).mean(-1)
 
 
 def test_the_independent_walks_fresnel_is_jsss_fresnel():
@@ -101,23 +102,10 @@ def test_far_from_the_beam_the_light_leaves_obliquely_and_the_normal_reads_it():
     the model's mean deviation is within 3 combined errors (the tables' error taken as fully
     correlated across the annuli, as neighbouring annuli share cells)."""
     edges = np.array([2.6, 3.37, 4.37, 5.67, 7.35])                         # transport lengths (mm here)
-    sigma_a, batches, photons = float(profiles._tables()["absorption"][22]), 16, 8_000_000
-    rng = np.random.default_rng(23)
-    means = []
-    for _ in range(batches):
-        tally = np.zeros(edges.size - 1)
-
-        def add(x, y, weight, tally=tally):
-            tally += np.histogram(np.hypot(x, y), edges, weights=weight)[0]
-
-        camera_walk(sigma_a, 1.0, 1.0, 0.0, 0.0, photons=photons // batches, rng=rng, tally=add)
-        means.append(tally / (photons // batches * np.pi * np.diff(edges**2)))
-    walk = np.mean(means, axis=0)
-    walk_error = np.std(means, axis=0, ddof=1) / np.sqrt(batches)
-    r = np.stack([np.sqrt(np.linspace(a**2, b**2, 33)[1::2]) for a, b in itertools.pairwise(edges)])
-    medium = Medium(sigma_a, 1.0, 1.0)
-    exact = np.asarray(transport.radiance(medium, r, 1.0)).mean(-1)
-    cones = np.asarray(transport.radiance(medium, r, 1.0, exact=False)).mean(-1)
+    sigma_a = float(profiles._tables()["absorption"][22])
+    walk, walk_error = _walk(sigma_a, 0.0, 0.0, photons=8_000_000, seed=23, batches=16, eta=1.0, edges=edges)
+    exact = _model(sigma_a, 0.0, 0.0, eta=1.0, edges=edges)
+    cones = _model(sigma_a, 0.0, 0.0, eta=1.0, edges=edges, exact=False)
     assert np.all(cones - walk > 3 * walk_error), ((cones / walk - 1).round(4), (walk_error / walk).round(4))
     data = profiles._tables()
     cells = np.searchsorted(data["rho_edges"], np.sqrt(edges[:-1] * edges[1:])) - 1
