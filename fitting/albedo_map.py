@@ -29,14 +29,11 @@ exit law, the deposit depth) is held at the start's; the fit re-plans when the f
 planner's variances.
 
 Solver: Gauss-Newton on the whitened residuals :math:`r = (g L - I)/s`, each step's normal
-equations :math:`J^T J\,\delta = -J^T r` solved by preconditioned conjugate gradients
+equations :math:`J^T J\,\delta = -J^T r` solved by conjugate gradients (:class:`lineax.CG`)
 on :math:`v \mapsto J^T (J v)` from :func:`jax.linearize` and its transpose: the Jacobian is never
 formed. CG runs on the system scaled by its diagonal, :math:`D^{-1/2} A D^{-1/2}`, whose texel
 entries are probed at each step (nine products: the map coloured on a 3 x 3 lattice, random
-signs per colour) and whose mean free path entries are exact (one JVP), preconditioned by the
-Jacobian's local part, the colour layer on the way out (:mod:`fitting.local_preconditioner`:
-sparse, formed from 32 products of that part alone, factorised per step); it stops when the
-residual's 2-norm is below ``cg_rtol`` of the right-hand side's. A halving line search.
+signs per colour) and whose mean free path entries are exact (one JVP); a halving line search.
 
 Uncertainty: the covariance is :math:`s^2 (J^T J)^{-1}` with :math:`s^2 = \max(1, \chi^2/\nu)`
 (:mod:`fitting.statistics`). Its diagonal is estimated by *probing* (``errors="probe"``): the map
@@ -62,16 +59,12 @@ from dataclasses import dataclass
 
 import equinox as eqx
 import jax
+from jax.flatten_util import ravel_pytree
 import jax.numpy as jnp
 import lineax as lx
 import numpy as np
-from jax.flatten_util import ravel_pytree
+import optimistix as optx
 
-from fitting.local_preconditioner import (
-    LocalPreconditioner,
-    local_probes,
-    texel_columns,
-)
 from fitting.render import HUBER_K, RenderFitError, _huber, estimate_noise, fit_pixels
 from fitting.statistics import error_scale, reduced_chi2
 from jsss.medium import Medium
@@ -94,12 +87,6 @@ ERROR_RTOL = 1e-3
 SCHUR_RTOL = 1e-7
 # Texels apart that share a probe of diag(J^T J): 3 x 3 = 9 products per Gauss-Newton step
 DIAGONAL_SPACING = 3
-# Levenberg-Marquardt's damping of a Gauss-Newton step, (J^T J + STEP_DAMPING diag(J^T J)) delta = -J^T r.
-# None: damped by 1 %, the first step's CG took 24 iterations instead of 230-460 on a 32^2 map, but
-# the damped steps crept along the valley where the mean free paths trade against the map (the
-# tests' fit moved the mean free path 7 % off its start at the truth and had not converged in 12
-# steps). Kept as a named value so that the next attempt (an adaptive damping) starts here.
-STEP_DAMPING = 0.0
 
 
 class AlbedoMapError(RenderFitError):
@@ -504,8 +491,6 @@ class _Model:
         k = DIAGONAL_SPACING
         self.diagonal_signs = jnp.asarray(np.stack([np.where(((rows % k == i) & (cols % k == j))[..., None], signs, 0.0)
                                                     for i in range(k) for j in range(k)]), dtype)
-        self.local_probes = jnp.asarray(local_probes(shape), dtype)
-        self.preconditioner = None
         self._build()
 
     def refresh(self, ell):
@@ -539,16 +524,13 @@ class _Model:
                            for v, s, use in zip(self.views, sigmas, self.uses))
         return self
 
-    def _radiance(self, u, ell, view, static, u_entry=None):
-        """The photo's model (H, W, 3); the colour layer on the way in read from ``u_entry``
-        where given (the exit part alone then moves with ``u``: the preconditioner's)."""
+    def _radiance(self, u, ell, view, static):
         method, prepared = static
         medium = _medium(ell, self.albedo_prime, self.eta)
         weights = render_profile(self.fit_material(medium), view.params.variances, radii=view.radii,
                                  medium=medium).weights.astype(self.dtype)
         params = eqx.tree_at(lambda p: (p.weights, p.maps.albedo), view.params, (weights, jnp.exp(u)))
-        entry_params = params if u_entry is None else eqx.tree_at(lambda p: p.maps.albedo, params, jnp.exp(u_entry))
-        entry, _, _ = method.surface(entry_params, prepared, self.dtype)
+        entry, _, _ = method.surface(params, prepared, self.dtype)
         low = view.blur_params
         blurred = method.diffusion(low, prepared, (view.irradiance * entry).astype(low.variances.dtype))
         M = method.texel_exitance(params, prepared, blurred.astype(self.dtype))
@@ -566,69 +548,25 @@ class _Model:
         def images(x, views):
             return tuple(self._radiance(x["u"], x["ell"], v, s) for v, s in zip(views, statics))
 
-        def local_columns(x, views, probes):
-            """J_exit (the colour layer on the way out alone) applied to each probe map."""
-            def exit_only(u):
-                parts = [((self._radiance(u, x["ell"], v, s, u_entry=x["u"]) - v.target) * v.inverse_sigma).reshape(-1)
-                         for v, s in zip(views, statics)]
-                r = jnp.concatenate(parts)
-                return _huber(r) if self.robust else r
-
-            _, jvp = jax.linearize(exit_only, x["u"])
-            flat = probes.reshape((-1,) + probes.shape[2:])
-            return jax.lax.map(jvp, flat).reshape(probes.shape[:2] + (-1,))
-
         self._residuals = eqx.filter_jit(residuals)
         self._images = eqx.filter_jit(images)
         self._raw = residuals
-        self._local_columns = eqx.filter_jit(local_columns)
-        dtype = self.dtype
-
-        def precondition(y, root, damping):
-            """The scaled system's preconditioner D^1/2 (M + damping D)^-1 D^1/2 (M:
-            :class:`LocalPreconditioner`, built with the damping; on the mean free paths M is the
-            diagonal, 1 + damping once scaled)."""
-            shape = jax.ShapeDtypeStruct(y["u"].shape, dtype)
-            u = jax.pure_callback(self._apply_preconditioner, shape, y["u"] * root["u"], vmap_method="sequential")
-            return {"u": u * root["u"], "ell": y["ell"] / (1 + damping)}
-
-        def cg(A, d, b, rtol, damping):
+        def cg(A, d, b, rtol):
             # Symmetric Jacobi scaling, D^-1/2 A D^-1/2 y = D^-1/2 b, x = D^-1/2 y: the scaled
             # matrix has a unit diagonal, so y and its residual share units and one 2-norm stop
-            # (||r|| <= rtol ||b||) means the same for every texel. Preconditioned by the exit
-            # part (LocalPreconditioner). Written out rather than lineax.CG: lineax also stops only
-            # when the last iterate's change is below the tolerance, which the barely seen texels'
-            # near-null directions keep large, and with that test CG ran to its 500-step limit
-            # on the tests' map where the residual's test stops it at 60-90.
+            # (||r|| <= rtol ||b||) means the same for every texel. lineax's default stop is per
+            # element (atol + rtol |b_i|, max norm): the barely seen texels' near-null directions
+            # kept it iterating hundreds of times on residuals that move no seen texel.
             root = jax.tree.map(jnp.sqrt, d)
-            flat_b, unravel = ravel_pytree(jax.tree.map(jnp.divide, b, root))
-            flat_root = ravel_pytree(root)[0]
-
-            def matrix(y):
-                return ravel_pytree(jax.tree.map(jnp.divide, A.mv(unravel(y / flat_root)), root))[0] + damping * y
-
-            def inverse(y):
-                return ravel_pytree(precondition(unravel(y), root, damping))[0]
-
-            tolerance = rtol * jnp.linalg.norm(flat_b)
-            z0 = inverse(flat_b)
-
-            def body(state):
-                y, r, p, gamma, step = state
-                Ap = matrix(p)
-                alpha = gamma / (p @ Ap)
-                y, r = y + alpha * p, r - alpha * Ap
-                z = inverse(r)
-                gamma_next = r @ z
-                return y, r, z + (gamma_next / gamma) * p, gamma_next, step + 1
-
-            def going(state):
-                _, r, _, gamma, step = state
-                return (jnp.linalg.norm(r) > tolerance) & (step < self.cg_max_steps) & (gamma > 0)
-
-            y, r, _, _, steps = jax.lax.while_loop(going, body, (jnp.zeros_like(flat_b), flat_b, z0, flat_b @ z0,
-                                                                  jnp.asarray(0)))
-            return (jax.tree.map(jnp.divide, unravel(y), root), steps, jnp.linalg.norm(r) <= tolerance)
+            scaled = lx.FunctionLinearOperator(
+                lambda y: jax.tree.map(jnp.divide, A.mv(jax.tree.map(jnp.divide, y, root)), root),
+                A.in_structure(), tags=lx.positive_semidefinite_tag)
+            rhs = jax.tree.map(jnp.divide, b, root)
+            size = jnp.sqrt(sum(jnp.sum(leaf**2) for leaf in jax.tree.leaves(rhs)))
+            solver = lx.CG(rtol=0.0, atol=rtol * size, norm=optx.two_norm, max_steps=self.cg_max_steps)
+            sol = lx.linear_solve(scaled, rhs, solver, throw=False)
+            return (jax.tree.map(jnp.divide, sol.value, root), sol.stats["num_steps"],
+                    sol.result == lx.RESULTS.successful)
 
         def solve(x, views, b, newton, free, rtol, diagonal):
             """(J^T J)^-1 on the seen texels of ``b``, or, where ``newton``, of -J^T r (the Gauss-Newton
@@ -637,14 +575,12 @@ class _Model:
             A, r, _, vjp, project = self._operator(x, views, free)
             d = {"u": diagonal["u"], "ell": jnp.where(free > 0, diagonal["ell"], 1.0)}
             step = jax.tree.map(jnp.negative, project(vjp(r)[0]))
-            damping = jnp.where(newton, STEP_DAMPING, 0.0).astype(self.dtype)
-            return cg(A, d, jax.tree.map(lambda s, v: jnp.where(newton, s, v), step, b), rtol, damping)
+            return cg(A, d, jax.tree.map(lambda s, v: jnp.where(newton, s, v), step, b), rtol)
 
         compiled = eqx.filter_jit(solve)
         # newton, free and the tolerance as arrays: as Python scalars they would be static, one
         # program each. A Gauss-Newton step needs only cg_rtol (an inexact step: the next one
-        # corrects it, and it is damped by STEP_DAMPING); the error solves ERROR_RTOL (undamped),
-        # the mean free paths' SCHUR_RTOL.
+        # corrects it); the error solves ERROR_RTOL, the mean free paths' SCHUR_RTOL.
         self._solve = lambda x, views, b, newton, free, diagonal, rtol=None: compiled(
             x, views, b, jnp.asarray(newton), jnp.asarray(free, self.dtype),
             jnp.asarray(rtol if rtol is not None else self.cg_rtol if newton else ERROR_RTOL, self.dtype), diagonal)
@@ -723,21 +659,6 @@ class _Model:
                            for k in range(3)])
         return {"u": d_u, "ell": jnp.maximum(d_ell, 1e-300)}
 
-    def _apply_preconditioner(self, u):
-        u = np.asarray(u)
-        if self.preconditioner is None:
-            return u
-        return self.preconditioner.solve(u, np.ones(3))[0].astype(u.dtype)
-
-    def set_preconditioner(self, x, diagonal, damping=0.0):
-        """:class:`LocalPreconditioner` at ``x`` (the exit part's columns from a few products of
-        it alone, no blur); the diagonal scaling alone where a UV layout puts two texels of a
-        probe's colour under one pixel."""
-        values = np.asarray(self._local_columns(x, self.views, self.local_probes))
-        columns = texel_columns(values, self.shape[0] * self.shape[1])
-        self.preconditioner = None if columns is None else LocalPreconditioner(
-            columns, self.free, np.asarray(diagonal["u"]), np.asarray(diagonal["ell"]), damping)
-
     def _split(self, flat):
         out, at = [], 0
         for v in self.views:
@@ -751,9 +672,8 @@ class _Model:
         cost = float(np.sum(self.residuals(u, ell) ** 2))
         cg_total, converged, n = 0, False, 0
         for n in range(1, max_steps + 1):
-            diagonal = self._diagonal_of(x, self.views)
-            self.set_preconditioner(x, diagonal, STEP_DAMPING)
-            delta, cg, _ = self._solve(x, self.views, jax.tree.map(jnp.zeros_like, x), True, 1.0, diagonal)
+            delta, cg, _ = self._solve(x, self.views, jax.tree.map(jnp.zeros_like, x), True, 1.0,
+                                          self._diagonal_of(x, self.views))
             cg_total += int(cg)
             t = 1.0
             for _ in range(8):  # halving line search
@@ -799,7 +719,6 @@ class _Model:
         # is poorly constrained (it had put a channel's texel errors 1.5-1.9x too wide)
         zeros_u, ones_ell = jnp.zeros(self.shape + (3,), self.dtype), jnp.ones(3, self.dtype)
         diagonal = self._diagonal_of(x, self.views)
-        self.set_preconditioner(x, diagonal)
         coupled, cg, _ = self._solve(x, self.views, {"u": zeros_u, "ell": ones_ell}, False, 1.0, diagonal,
                                         SCHUR_RTOL)
         var_ell = np.asarray(coupled["ell"])
