@@ -99,6 +99,9 @@ class MediumFit(eqx.Module):
     sigma_a_table_err, sigma_s_prime_table_err : Array [1/mm]
         The share of the tables' Monte Carlo noise in the errors above (added in quadrature:
         the data's share is ``sqrt(err**2 - table_err**2)``); 0 for the dipole.
+    model_bins : Array ``(n_bins, C)`` [1/mm^2]
+        The model at the estimate in each bin of ``profile`` (beam and pixels as fitted): the
+        expectation a noise model can be evaluated at (:func:`measure.pipeline.fit_measurement`).
     """
 
     medium: Medium
@@ -111,6 +114,7 @@ class MediumFit(eqx.Module):
     converged: jax.Array
     sigma_a_table_err: jax.Array | None = None
     sigma_s_prime_table_err: jax.Array | None = None
+    model_bins: jax.Array | None = None
 
 
 def _interpolation_rows(grid_r, radii, rows, n_rows, scale):
@@ -240,7 +244,7 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
         # The model's whole-plane total at the estimate, on the full grid (reported, not fitted).
         plane_total = observable(*model, Medium(sa, ss, eta_c), k, grid_r, fixed_c)[1]
         return (sa, ss, sa_err, ss_err, plane_total, rel_rms, chi2_red, loss, steps, sa_table, ss_table,
-                ok & determined)
+                binned, ok & determined)
 
     return jax.vmap(one, in_axes=(1, 1, 0, 0, 0, 0, 0, 0))(measured, stderr, totals, total_errs, scale_errs, eta, fixed,
                                                           noise)
@@ -395,6 +399,6 @@ def fit_medium(profile, stderr, eta, *, pixel_radii, bin_index, total_reflectanc
         # where every start finds the truth at 1.1-1.3): solve it from every start, keep the lower loss.
         retry = _fit_channels(*operands, **options, multistart=True, n_starts=7)
         better = np.asarray(retry[7]) < np.asarray(out[7])
-        out = tuple(jnp.where(better, b, a) for a, b in zip(out, retry))
-    sa, ss, sa_err, ss_err, total, rel, chi2, _, steps, sa_table, ss_table, ok = out
-    return MediumFit(Medium(sa, ss, eta), sa_err, ss_err, total, rel, chi2, steps, ok, sa_table, ss_table)
+        out = tuple(jnp.where(better.reshape(better.shape + (1,) * (np.ndim(a) - 1)), b, a) for a, b in zip(out, retry))
+    sa, ss, sa_err, ss_err, total, rel, chi2, _, steps, sa_table, ss_table, binned, ok = out
+    return MediumFit(Medium(sa, ss, eta), sa_err, ss_err, total, rel, chi2, steps, ok, sa_table, ss_table, binned.T)
