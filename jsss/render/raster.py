@@ -12,6 +12,7 @@ pixel centres at ``i + 0.5``) and a positive depth along the view direction.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,6 +20,9 @@ import numpy as np
 __all__ = ["OrthographicView", "PerspectiveView", "Raster", "antialiased_raster", "rasterize", "surface_attributes"]
 
 _MAX_CANDIDATES = 1 << 22  # (triangle, pixel) pairs tested at once: bounds the memory of one chunk
+# A face with at least this many candidate pixels is tested alone: gathering its corners per pixel
+# was most of a 512^2 texture's raster of a two-triangle plane.
+_ALONE = 1 << 12
 
 
 def _basis(forward, up):
@@ -141,6 +145,14 @@ def _chunks(counts):
         start = end
 
 
+def _runs(counts, start, end):
+    """Faces ``[start, end)`` split into runs ``[a, b)`` in order, each face with at least
+    :data:`_ALONE` candidate pixels a run of its own (tested on its box without gathers)."""
+    big = np.flatnonzero(counts[start:end] >= _ALONE) + start
+    edges = np.unique(np.concatenate([[start, end], big, big + 1]))
+    return itertools.pairwise(edges)
+
+
 def rasterize(xy, depth, faces, shape, *, perspective: bool = True, where=None) -> Raster:
     """Depth-tested coverage of triangles at pixel centres.
 
@@ -178,36 +190,44 @@ def rasterize(xy, depth, faces, shape, *, perspective: bool = True, where=None) 
     best_face = np.full(H * W, -1, np.int64)
     best_bary = np.zeros((H * W, 3))
     for a, b in _chunks(counts):
-        n = counts[a:b]
-        if n.sum() == 0:
-            continue
-        tri = np.repeat(np.arange(a, b), n)
-        k = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
-        px = x0[tri] + k % bw[tri]
-        py = y0[tri] + k // bw[tri]
-        if where is not None:
-            wanted = where[py, px]
-            tri, px, py = tri[wanted], px[wanted], py[wanted]
-        cx, cy = px + 0.5, py + 0.5
-        t = p[tri]
-        # Edge functions: barycentric weight of vertex i is the area opposite it.
-        w0 = (t[:, 1, 0] - cx) * (t[:, 2, 1] - cy) - (t[:, 2, 0] - cx) * (t[:, 1, 1] - cy)
-        w1 = (t[:, 2, 0] - cx) * (t[:, 0, 1] - cy) - (t[:, 0, 0] - cx) * (t[:, 2, 1] - cy)
-        bary = np.stack([w0, w1, area[tri] - w0 - w1], -1) / area[tri, None]
-        inside = np.all(bary >= -1e-9, axis=1)
-        tri, bary, pix = tri[inside], bary[inside], (py * W + px)[inside]
-        if perspective:
-            inv = bary / z[tri]
-            d = 1.0 / inv.sum(1)
-            bary = inv * d[:, None]
-        else:
-            d = (bary * z[tri]).sum(1)
-        # The depth test: the nearest depth per pixel by an unbuffered minimum, then the candidates
-        # that hold it (a sort by pixel and depth took two thirds of a small map's time).
-        np.minimum.at(best_depth, pix, d)
-        nearest = d <= best_depth[pix]
-        pix = pix[nearest]
-        best_face[pix], best_bary[pix] = tri[nearest], bary[nearest]
+        for start, end in _runs(counts, a, b):
+            n = counts[start:end]
+            if n.sum() == 0:
+                continue
+            alone = end - start == 1 and n[0] >= _ALONE
+            if alone:  # one face's box, row by row: its corners are scalars, nothing to gather per pixel
+                rows, cols = np.divmod(np.arange(n[0]), bw[start])
+                px, py = x0[start] + cols, y0[start] + rows
+                tri = np.full(n[0], start)
+            else:
+                tri = np.repeat(np.arange(start, end), n)
+                k = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+                px = x0[tri] + k % bw[tri]
+                py = y0[tri] + k // bw[tri]
+            if where is not None:
+                wanted = where[py, px]
+                tri, px, py = tri[wanted], px[wanted], py[wanted]
+            cx, cy = px + 0.5, py + 0.5
+            t, face_area = (p[start], area[start]) if alone else (p[tri], area[tri])
+            # Edge functions: barycentric weight of vertex i is the area opposite it.
+            w0 = (t[..., 1, 0] - cx) * (t[..., 2, 1] - cy) - (t[..., 2, 0] - cx) * (t[..., 1, 1] - cy)
+            w1 = (t[..., 2, 0] - cx) * (t[..., 0, 1] - cy) - (t[..., 0, 0] - cx) * (t[..., 2, 1] - cy)
+            bary = np.stack([w0, w1, face_area - w0 - w1], -1) / np.asarray(face_area)[..., None]
+            inside = np.all(bary >= -1e-9, axis=1)
+            tri, bary, pix = tri[inside], bary[inside], (py * W + px)[inside]
+            face_z = z[start] if alone else z[tri]
+            if perspective:
+                inv = bary / face_z
+                d = 1.0 / inv.sum(1)
+                bary = inv * d[:, None]
+            else:
+                d = (bary * face_z).sum(1)
+            # The depth test: the nearest depth per pixel by an unbuffered minimum, then the
+            # candidates that hold it (a sort by pixel and depth took two thirds of a small map's time).
+            np.minimum.at(best_depth, pix, d)
+            nearest = d <= best_depth[pix]
+            pix = pix[nearest]
+            best_face[pix], best_bary[pix] = tri[nearest], bary[nearest]
     return Raster(best_face.reshape(H, W), best_bary.reshape(H, W, 3), best_depth.reshape(H, W))
 
 

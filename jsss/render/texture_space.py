@@ -102,10 +102,10 @@ def bake_texels(mesh: Mesh, size: int) -> TexelGeometry:
     xy = mesh.uvs * size
     raster = rasterize(xy, np.ones(len(xy)), mesh.faces, (size, size), perspective=False)
     mask = raster.mask
-    position = surface_attributes(raster, mesh.faces, mesh.vertices)
-    normal = surface_attributes(raster, mesh.faces, mesh.normals)
+    # One interpolation of all three (each gathers every texel's corners: a third of the time apart).
+    attributes = surface_attributes(raster, mesh.faces, np.concatenate([mesh.vertices, mesh.normals, mesh.uvs], 1))
+    position, normal, uv = attributes[..., :3], attributes[..., 3:6], attributes[..., 6:]
     normal /= np.where(mask, np.linalg.norm(normal, axis=-1), 1.0)[..., None]
-    uv = surface_attributes(raster, mesh.faces, mesh.uvs)
     du, dv, area = face_stretch(mesh)
     face = np.where(mask, raster.face, 0)
     stretch = np.where(mask[..., None], np.stack([du[face], dv[face]], -1) / size, 0.0)
