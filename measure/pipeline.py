@@ -336,8 +336,14 @@ def _streak_length_mm(medium, view_angle_deg: float, g: float) -> np.ndarray:
 
 def _model_bins(result: MeasurementFit) -> np.ndarray:
     """The fitted observable, beam-convolved, averaged over each bin's pixels (``(B, C)``)."""
-    return _binned_model(result.profile, result.fit.medium, result.beam_sigma_mm, result.model, result.g,
-                         result.view_angle_deg)
+    prof = result.profile
+    at_pixels = observed(result.fit.medium, prof.pixel_r_mm, result.beam_sigma_mm, model=result.model, g=result.g,
+                         view_angle_deg=result.view_angle_deg)
+    n_bins = prof.r_mm.size
+    sums = np.stack([np.bincount(prof.bin_index, at_pixels[:, c], minlength=n_bins)[:n_bins]
+                     for c in range(at_pixels.shape[1])], axis=-1)
+    counts = np.bincount(prof.bin_index, minlength=n_bins)[:n_bins]
+    return sums / np.maximum(counts, 1)[:, None]
 
 
 def _one_hit_floor(prof: RadialProfile) -> np.ndarray:
@@ -376,14 +382,3 @@ def _expected_bins(prof: RadialProfile, fit: MediumFit, r_min: float, model: str
     use = covered & np.all(np.isfinite(binned), axis=0)
     expected[outer] = np.where(use, binned, expected[outer])
     return expected
-
-
-def _binned_model(prof: RadialProfile, medium, beam_sigma_mm, model, g, view_angle_deg) -> np.ndarray:
-    """``medium``'s observable, beam-convolved, averaged over each bin's pixels of ``prof`` (``(B, C)``)."""
-    at_pixels = observed(medium, prof.pixel_r_mm, beam_sigma_mm, model=model, g=g, view_angle_deg=view_angle_deg)
-    n_bins = prof.r_mm.size
-    sums = np.stack([np.bincount(prof.bin_index, at_pixels[:, c], minlength=n_bins)[:n_bins]
-                     for c in range(at_pixels.shape[1])], axis=-1)
-    counts = np.bincount(prof.bin_index, minlength=n_bins)[:n_bins]
-    return sums / np.maximum(counts, 1)[:, None]
-
