@@ -51,15 +51,15 @@ def _fit_options(parser):
     parser.add_argument("--pixel-mm", type=float,
                         help="pixel size on the sample [mm] (default: EXR header). No fit can check it: every "
                              "coefficient scales as 1/pixel size. Measure it: fit-params pixel-size --help")
-    parser.add_argument("--eta", type=float, default=1.3, help="relative index of refraction (default 1.3)")
-    parser.add_argument("--reference-reflectance", type=float, default=0.99,
+    parser.add_argument("--eta", type=float, help="relative index of refraction (default 1.3)")
+    parser.add_argument("--reference-reflectance", type=float,
                         help="total reflectance of the reference (default 0.99, Spectralon)")
     parser.add_argument("--model", default="transport", choices=["dipole", "transport"],
                         help="profile model: transport (default; scaled Monte Carlo tables, exact to radiative "
                              "transfer, eta 1.0-1.6) or dipole (diffusion: tens of percent off near the source)")
     parser.add_argument("--g", type=float, default=0.0,
                         help="Henyey-Greenstein g of the material for --model transport (0, 0.5, 0.8 or 0.9; default 0)")
-    parser.add_argument("--white-balance", default="none", choices=("none", "camera", "daylight"),
+    parser.add_argument("--white-balance", choices=("none", "camera", "daylight"),
                         help="multipliers applied to raw files (default none: the white reference calibrates each "
                              "channel); the choice is recorded")
     parser.add_argument("--view-angle", type=float, default=0.0, metavar="DEG",
@@ -202,9 +202,22 @@ def _view_angle(args):
     return None if args.exitance else args.view_angle
 
 
+# The options that describe a measured sample, with their defaults. They default to None in the
+# parser so that a demo can tell a flag given from a default: the demo makes its own sample.
+_SAMPLE_OPTIONS = {"pixel_mm": ("--pixel-mm", None), "eta": ("--eta", 1.3),
+                   "reference_reflectance": ("--reference-reflectance", 0.99),
+                   "white_balance": ("--white-balance", "none"), "reference": ("--reference", None),
+                   "dark": ("--dark", None), "saturation": ("--saturation", None)}
+
+
 def main(argv=None) -> int:
     """The ``fit-params`` console script; returns the exit status (2: bad input, one line)."""
     args = parser().parse_args(argv)
+    args.sample_options_given = [flag for key, (flag, _) in _SAMPLE_OPTIONS.items()
+                                 if getattr(args, key, None) is not None]
+    for key, (_, default) in _SAMPLE_OPTIONS.items():
+        if getattr(args, key, None) is None and hasattr(args, key):
+            setattr(args, key, default)
     return exit_status(PROG, args.run, args)
 
 
@@ -222,6 +235,13 @@ def _fit(args) -> int:
             raise UsageError(f"{flag} {value}: is a folder; give a file name, e.g. {Path(value) / example}")
     say = Progress(PROG, enabled=False if args.quiet else None)
     if args.demo:
+        # A flag the demo would ignore is refused: the demo's marble is made and fitted at its own
+        # pixel size and index (it had fitted as if --pixel-mm -1 were fine).
+        ignored = args.sample_options_given + (["MEASUREMENT"] if args.measurement else [])
+        if ignored:
+            raise UsageError(f"{', '.join(ignored)}: --demo makes and fits its own sample (marble, eta 1.5, "
+                             f"{DEMO_PIXEL_MM} mm pixels, its own reference); drop {'them' if len(ignored) > 1 else 'it'}, "
+                             f"or fit your files without --demo")
         return _demo(args, say)
     if not args.measurement:
         raise UsageError("give a MEASUREMENT.exr (with --reference), or --demo, or 'batch'")

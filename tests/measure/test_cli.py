@@ -274,6 +274,20 @@ def test_demo_keeps_its_images_with_keep(tmp_path):
     assert alone.returncode == 2 and "--keep DIR goes with --demo" in alone.stderr
 
 
+@pytest.mark.parametrize("flags, named", [(["--pixel-mm", "-1"], "--pixel-mm"), (["--eta", "1.3"], "--eta"),
+                                          (["--reference-reflectance", "0.5", "--dark", "d.exr"],
+                                           "--reference-reflectance, --dark"),
+                                          (["sample.exr"], "MEASUREMENT")])
+def test_demo_refuses_what_describes_a_measured_sample(flags, named):
+    """--demo makes its own sample (marble, eta 1.5, 0.14 mm pixels). A flag that describes a
+    measured one would be ignored, so it is refused in one line, before any work (before:
+    ``--demo --pixel-mm -1`` fitted the demo and exited 0). ``--eta 1.3``, the default's own value,
+    is refused too: the flag was given."""
+    out = run("--demo", *flags)
+    assert out.returncode == 2 and "Traceback" not in out.stderr and out.stderr.strip().count("\n") == 0
+    assert f"error: {named}: --demo makes and fits its own sample" in out.stderr
+
+
 def test_batch_names_a_missing_directory(tmp_path):
     """before: `no measurement EXRs found`; now the directory is named as missing."""
     out = run("batch", tmp_path / "nosuchdir", "--out", tmp_path / "t.csv")
