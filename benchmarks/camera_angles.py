@@ -7,13 +7,18 @@ transport tables (absorption in the walk, its own Fresnel and scattering code; s
 (eta 1.3) from the library with g 0, and skin1's coefficients with g 0.9 (tissue's forward
 scattering). Each image is 256 px on the sample plane, its half-field four diffusion lengths of
 the medium's most penetrating channel, the beam one pixel wide (standard deviation), three
-channels. Fit: :func:`measure.pipeline.fit_measurement` as ``fit-params`` runs it, model
-transport, the image's view angle and g given (``--view-angle``, ``--g``), everything else
-default.
+channels, 1.2e6 photons each. With 3e5 photons the images' own noise was near the target:
+over seeds 21-26 marble's sigma_a at 0 degrees scattered by 1.2-1.8 % (standard deviation)
+from walk to walk, two to three times the data's share of its stated error, because a walk
+photon's next-event estimates land on many pixels along its path and so are correlated
+across bins, which a camera's photon noise is not (2026-12-06). Fit:
+:func:`measure.pipeline.fit_measurement` as ``fit-params`` runs it, model transport, the image's
+view angle and g given (``--view-angle``, ``--g``), everything else default.
 
 Per channel: relative error and z = (estimate - truth) / stated error of sigma_a and
-sigma_s', chi^2/dof and the fit's status. The issue's target: every parameter within 3 %;
-ketchup's green and blue (reduced albedo 0.07 and 0.02: their light is single scattering in
+sigma_s', chi^2/dof (the data's noise alone, and with the tables' own noise counted, which the
+fit's quality judges: :attr:`fitting.medium.MediumFit.chi2_reduced_tables`) and the fit's
+quality. The issue's target: every parameter within 3 %; ketchup's green and blue (reduced albedo 0.07 and 0.02: their light is single scattering in
 the beam's core) may instead be within 3 stated errors. Walks take minutes (marble's red,
 albedo' 0.999, longest), so ``--cache DIR`` keeps each image.
 
@@ -69,7 +74,7 @@ def _image(name, medium, g, view, *, photons, seed, cache):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--photons", type=int, default=300_000, help="photons per channel and image")
+    parser.add_argument("--photons", type=int, default=1_200_000, help="photons per channel and image")
     parser.add_argument("--seed", type=int, default=21)
     parser.add_argument("--cache", default=None, help="directory that keeps the walk images between runs")
     parser.add_argument("--media", nargs="+", default=None, help="a subset of: " + ", ".join(_media()))
@@ -83,8 +88,9 @@ def main():
               f"{args.photons:.1e} photons per channel, {SIZE} px over 4 diffusion lengths each side, seed {args.seed}. "
               "Fit: `fit_measurement(model='transport', g=..., view_angle_deg=...)`, other settings default. "
               "Written by `benchmarks/camera_angles.py`."), "",
-             "| medium | view | channel | sigma_a error (z) | sigma_s' error (z) | chi2/dof | quality | meets target |",
-             "|---|---:|---|---:|---:|---:|---|---|"]
+             ("| medium | view | channel | sigma_a error (z) | sigma_s' error (z) | chi2/dof | chi2/dof, tables counted "
+              "| quality | meets target |"),
+             "|---|---:|---|---:|---:|---:|---:|---|---|"]
     print("\n".join(lines), flush=True)
     met, total = 0, 0
     for name, (medium, g) in media.items():
@@ -105,7 +111,8 @@ def main():
                 total += 1
                 met += all(within)
                 row = (f"| {name} | {view:g} | {channel} | {cells[0]} | {cells[1]} | {table['chi2_reduced'][c]:.3g} | "
-                       f"{table['quality'][c].split(':')[0]} | {'yes' if all(within) else 'no'} |")
+                       f"{table['chi2_reduced_tables'][c]:.3g} | {table['quality'][c].split(':')[0]} | "
+                       f"{'yes' if all(within) else 'no'} |")
                 lines.append(row)
                 print(row, flush=True)
             print(f"<!-- {name} {view:g} deg: walk {walk_s:.0f} s -->", file=sys.stderr, flush=True)

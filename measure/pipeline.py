@@ -127,8 +127,15 @@ class MeasurementFit:
 
     @property
     def quality(self) -> list[str]:
-        """Per channel ``"ok"`` or ``"poor: ..."`` from chi^2/dof (:func:`measure.checks.fit_quality`)."""
-        return fit_quality(self.fit.chi2_reduced)
+        """Per channel ``"ok"`` or ``"poor: ..."`` (:func:`measure.checks.fit_quality`) from chi^2/dof
+        with the transport tables' own noise counted (:attr:`fitting.medium.MediumFit.chi2_reduced_tables`):
+        an image less noisy than the tables shows their noise as a misfit no parameter removes."""
+        return fit_quality(self._judged_chi2)
+
+    @property
+    def _judged_chi2(self):
+        f = self.fit
+        return f.chi2_reduced if f.chi2_reduced_tables is None else f.chi2_reduced_tables
 
     def table(self) -> dict:
         """Per-channel results as plain lists (the JSON and CSV schema)."""
@@ -155,6 +162,8 @@ class MeasurementFit:
             "rel_residual": as_list(f.rel_residual),
             "converged": [bool(x) for x in np.asarray(f.converged).reshape(-1)],
             "chi2_reduced": as_list(f.chi2_reduced),
+            # The same with the tables' noise in the residuals' covariance: what quality and status judge.
+            "chi2_reduced_tables": as_list(self._judged_chi2),
             "quality": self.quality,
             "field_mm": float(self.field_mm),
             "field_diffusion_lengths": as_list(self.field_diffusion_lengths),

@@ -352,13 +352,20 @@ RESULT_KEYS = ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "
                "sigma_s_prime_table_err", "total_reflectance", "mean_free_path_mm")
 
 
+def _judged_chi2(table: dict) -> list:
+    """chi2/dof with the transport tables' own noise counted (``chi2_reduced_tables``), which
+    quality and status judge; ``chi2_reduced`` in tables written before it existed."""
+    return table.get("chi2_reduced_tables", table["chi2_reduced"])
+
+
 def with_status(table: dict) -> dict:
-    """The table with ``status`` per channel (``poor`` where chi2/dof is not finite or above
-    :data:`measure.checks.NOT_A_RESULT_CHI2`, else ``ok``) and, where a channel is poor, its values
-    out of the result's place: ``None`` there, and every channel's numbers kept under ``estimate``."""
+    """The table with ``status`` per channel (``poor`` where chi2/dof, the tables' noise counted, is
+    not finite or above :data:`measure.checks.NOT_A_RESULT_CHI2`, else ``ok``) and, where a channel is
+    poor, its values out of the result's place: ``None`` there, and every channel's numbers kept
+    under ``estimate``."""
     from measure.checks import NOT_A_RESULT_CHI2
 
-    status = ["ok" if math.isfinite(chi2) and chi2 <= NOT_A_RESULT_CHI2 else "poor" for chi2 in table["chi2_reduced"]]
+    status = ["ok" if math.isfinite(chi2) and chi2 <= NOT_A_RESULT_CHI2 else "poor" for chi2 in _judged_chi2(table)]
     out = {**table, "status": status}
     if "poor" in status:
         out["estimate"] = {key: list(table[key]) for key in RESULT_KEYS}
@@ -372,7 +379,7 @@ def _format_table(table) -> str:
              f"{'mfp [mm]':>9} {'rel. resid.':>11}"]
     for i, ch in enumerate(table["channels"]):
         if table.get("status", ["ok"] * (i + 1))[i] == "poor":
-            chi2 = f"poor fit, chi2/dof {table['chi2_reduced'][i]:.3g}: not a measurement"
+            chi2 = f"poor fit, chi2/dof {_judged_chi2(table)[i]:.3g}: not a measurement"
             lines.append(f"{ch:<8} {chi2:>45} {'-':>10} {'-':>9} {table['rel_residual'][i]:>11.2e}")
             continue
         sa = f"{table['sigma_a'][i]:.5g} +- {table['sigma_a_err'][i]:.2g}"
@@ -505,7 +512,7 @@ def _report(result, args, truth=None, extra=None, stem="fitted") -> int:
         if args.plot:
             print(f"\nplot written to {args.plot}")
     if poor and not args.accept_poor:
-        chi2 = ", ".join(f"{c:.3g}" for c, s in zip(raw["chi2_reduced"], table["status"]) if s == "poor")
+        chi2 = ", ".join(f"{c:.3g}" for c, s in zip(_judged_chi2(raw), table["status"]) if s == "poor")
         print(f"{PROG}: error: the fit of channel(s) {', '.join(poor)} is poor (chi2/dof {chi2}), not a measurement: "
               f"{LIKELY_CAUSES}; the estimate is kept apart ('estimate' in --json); --accept-poor exits 0",
               file=sys.stderr)
@@ -569,7 +576,7 @@ def _find_jobs(target, manifest):
 
 _ROW_KEYS = ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err", "sigma_a_table_err",
              "sigma_s_prime_table_err", "total_reflectance", "mean_free_path_mm",
-             "rel_residual", "chi2_reduced", "converged", "quality", "field_diffusion_lengths")
+             "rel_residual", "chi2_reduced", "chi2_reduced_tables", "converged", "quality", "field_diffusion_lengths")
 
 
 def _fit_row(job, options) -> dict:
