@@ -239,7 +239,7 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
             # estimates were within 1.8 %.
             residuals = _residuals(params, args)
             covariance = jnp.eye(residuals.size, dtype=residuals.dtype) + table_residuals @ table_residuals.T
-            chi2_tables = reduced_chi2(residuals @ jnp.linalg.solve(covariance, residuals), m, 2)
+            chi2_tables = reduced_chi2(residuals @ _conjugate_gradients(covariance, residuals), m, 2)
         cov = cov + table_cov
         binned, _ = _model(params, args[0])
         positive = usable & (meas > 0)
@@ -266,6 +266,24 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
 
     return jax.vmap(one, in_axes=(1, 1, 0, 0, 0, 0, 0, 0))(measured, stderr, totals, total_errs, scale_errs, eta, fixed,
                                                           noise)
+
+
+def _conjugate_gradients(matrix, vector):
+    """``matrix^-1 vector`` for a symmetric positive definite ``matrix`` (n, n) by n steps of
+    conjugate gradients, exact in exact arithmetic. Plain XLA operations, not LAPACK's: the fit
+    is a stored program (:mod:`jsss.stored_programs`), and a fresh-clone CI whose fit held
+    ``jnp.linalg.solve`` here had a worker segfault in XLA's compiler in two of three runs,
+    later in the same process."""
+    def step(_, state):
+        x, r, p, rr = state
+        ap = matrix @ p
+        alpha = rr / jnp.where(p @ ap > 0, p @ ap, 1.0)
+        x, r = x + alpha * p, r - alpha * ap
+        new = r @ r
+        return x, r, r + (new / jnp.where(rr > 0, rr, 1.0)) * p, new
+
+    start = (jnp.zeros_like(vector), vector, vector, vector @ vector)
+    return jax.lax.fori_loop(0, vector.size, step, start)[0]
 
 
 def _starting_points(total, eta, n_starts, *, scan):
