@@ -55,6 +55,7 @@ from functools import partial
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optimistix as optx
 import scipy.sparse
@@ -239,7 +240,13 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
             # estimates were within 1.8 %.
             residuals = _residuals(params, args)
             covariance = jnp.eye(residuals.size, dtype=residuals.dtype) + table_residuals @ table_residuals.T
-            chi2_tables = reduced_chi2(residuals @ _conjugate_gradients(covariance, residuals), m, 2)
+            # Conjugate gradients (plain XLA), not jnp.linalg.solve's LAPACK call: this fit is a
+            # stored program (jsss.stored_programs), and two of three fresh-clone CI runs whose fit
+            # held the LAPACK solve had a worker segfault in XLA's compiler later in that process.
+            operator = lx.MatrixLinearOperator(covariance, lx.positive_semidefinite_tag)
+            whitened = lx.linear_solve(operator, residuals, lx.CG(rtol=1e-12, atol=1e-12, max_steps=4 * residuals.size),
+                                       throw=False).value
+            chi2_tables = reduced_chi2(residuals @ whitened, m, 2)
         cov = cov + table_cov
         binned, _ = _model(params, args[0])
         positive = usable & (meas > 0)
@@ -266,24 +273,6 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
 
     return jax.vmap(one, in_axes=(1, 1, 0, 0, 0, 0, 0, 0))(measured, stderr, totals, total_errs, scale_errs, eta, fixed,
                                                           noise)
-
-
-def _conjugate_gradients(matrix, vector):
-    """``matrix^-1 vector`` for a symmetric positive definite ``matrix`` (n, n) by n steps of
-    conjugate gradients, exact in exact arithmetic. Plain XLA operations, not LAPACK's: the fit
-    is a stored program (:mod:`jsss.stored_programs`), and a fresh-clone CI whose fit held
-    ``jnp.linalg.solve`` here had a worker segfault in XLA's compiler in two of three runs,
-    later in the same process."""
-    def step(_, state):
-        x, r, p, rr = state
-        ap = matrix @ p
-        alpha = rr / jnp.where(p @ ap > 0, p @ ap, 1.0)
-        x, r = x + alpha * p, r - alpha * ap
-        new = r @ r
-        return x, r, r + (new / jnp.where(rr > 0, rr, 1.0)) * p, new
-
-    start = (jnp.zeros_like(vector), vector, vector, vector @ vector)
-    return jax.lax.fori_loop(0, vector.size, step, start)[0]
 
 
 def _starting_points(total, eta, n_starts, *, scan):
