@@ -13,12 +13,16 @@ each write a part (``--out part.npz --etas 1.0,1.1 --seeds 1``); ``--merge`` joi
 other etas, and ``--average`` parts of the same etas from other seeds (weighted by their
 photons). The shipped tables: ``--photons 500000 --seeds 0,1`` (two independent runs of
 500 000 photons), then ``--average`` of that file with ``--seeds 2`` and ``--seeds 3``:
-2 x 10^6 photons per (eta, g); then ``--early 10000000 --tables FULL.npz`` (about 28 minutes
-on 2 cores): 10^7 more photons per (eta, g) for the paths up to 4 transport lengths, which set
-the light of a low albedo (see ``add_early``). ``--walked EARLIER.npz`` blends an earlier
+2 x 10^6 photons per (eta, g); then ``--early 20000000 --tables FULL.npz`` (about 45 minutes
+on 2 cores): 2 x 10^7 more photons per (eta, g) for the paths up to 4 transport lengths, which
+set the light of a low albedo, at g 0.5-0.9 with early turns back toward the surface (see
+``add_early``). ``--walked EARLIER.npz`` blends an earlier
 run's early walks again (minutes). Last, ``--views 1000000 --tables FULL.npz`` (about 20
 minutes in two processes of --etas 1.0,1.1,1.2,1.3 and 1.4,1.5,1.6, then ``--merge``): the early
-part's radiance toward exact view directions (see ``add_views``).
+part's radiance toward exact view directions (see ``add_views``). The shipped file was made
+from the one before (10^7 early photons, no turns) by ``--rewalk-gs 0.8,0.9``, ``--rewalk-gs
+0.5``, ``--more-early 10000000`` and ``--reblend`` (about 45 minutes in all, see
+``rewalk_early``): the same walks, seeds and blend as ``--early 20000000`` makes.
 """
 
 from __future__ import annotations
@@ -48,6 +52,15 @@ EARLY_RUN = 500_000  # photons per early walk (one seed each)
 # The early walks' first flight: half at the medium's own rate, the rest 10, 100 and 1000 times
 # faster, so that the short paths of a strongly absorbing medium (a' up to 10^3) are well sampled.
 FIRST_FLIGHT_RATES = (1.0, 1.0, 1.0, 10.0, 100.0, 1000.0)
+# Where the phase function is peaked forward, a low albedo's light is the rare photon that turns
+# back within its first collisions: the early walks of these g draw the scatterings among a
+# photon's first EARLY_TURNS events from HG mixed with the uniform sphere (photon_walk._early_turn).
+# With 10^6 photons the total's error at a' 4 / 10 / 40 / 160 went from 1.07 / 1.64 / 2.45 / 2.90 %
+# to 0.54 / 0.56 / 0.72 / 0.84 % (eta 1.5, g 0.9; at a' <= 1 it stayed, 0.49 %), and from 0.62 /
+# 0.78 / 0.93 / 1.00 % to 0.45 / 0.56 / 0.65 / 0.69 % (eta 1.4, g 0.5). At g 0 HG is the sphere.
+EARLY_TURN_FRACTION = 0.35
+EARLY_TURNS = 3
+EARLY_TURN_GS = (0.5, 0.8, 0.9)
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "jsss" / "data" / "transport_tables.npz"
 
 
@@ -66,22 +79,25 @@ def _view_seed(eta, j):
     return 9_000_000 + round(float(eta) * 100) * 10 + j
 
 
-def _walk(eta, g, *, photons, seed, max_path, lanes=4096, progress=False, label="", first_flight_rates=None):
+def _walk(eta, g, *, photons, seed, max_path, lanes=4096, progress=False, label="", first_flight_rates=None,
+          early_turn=None):
     # sigma_s = 1/(1-g) per transport length: every length below is in units of 1/sigma_s'.
     params = _params([Medium(0.0, 1.0, eta)], [np.inf], g=g, eta_above=1 / eta, eta_below=1 / eta, relative=True)
     if first_flight_rates is not None:  # the start cosine (1: along the normal), then the rates
         params = params + (jnp.asarray(1.0, params[0].dtype), jnp.asarray(first_flight_rates, params[0].dtype))
+    if early_turn is not None:  # (uniform fraction, events): after the first flight's rates
+        params = params + (jnp.asarray(early_turn[0], params[0].dtype), jnp.asarray(early_turn[1], jnp.int32))
     return run_walk(params, n_photons=photons, lanes=lanes, max_steps=2**31 - 1, max_path=max_path, seed=seed,
                     progress=progress, label=label)
 
 
-def _early_tables(eta, g, seeds, photons_each, *, max_path, grid, first_flight_rates=None):
+def _early_tables(eta, g, seeds, photons_each, *, max_path, grid, first_flight_rates=None, early_turn=None):
     """The mean of short walks' tables (paths up to ``max_path`` only, no tail), one per seed:
     cells, their second moments (``tabulate``'s ``second``), totals and the totals' errors."""
     parts = []
     for seed in seeds:
         records = _walk(eta, g, photons=photons_each, seed=seed, max_path=max_path,
-                        first_flight_rates=first_flight_rates)
+                        first_flight_rates=first_flight_rates, early_turn=early_turn)
         parts.append(tabulate(records.radius, records.path, records.exit_cos, records.side == 1, records.side == 0,
                               grid=grid, max_path=max_path, model_tail=False, weight=records.weight))
     cells = np.mean([p["exitance"] for p in parts], axis=0)
@@ -147,16 +163,12 @@ def add_early(tables, *, photons, max_path=EARLY_MAX_PATH, progress=True, walked
             if walked is None:
                 new, new_second, new_total, new_error = _early_tables(
                     eta, g, [_early_seed(k, eta, j) for k in range(runs)], EARLY_RUN, max_path=max_path, grid=grid,
-                    first_flight_rates=FIRST_FLIGHT_RATES)
+                    first_flight_rates=FIRST_FLIGHT_RATES, early_turn=_early_turn_of(g))
             else:
                 new, new_second, new_total, new_error = (np.asarray(walked[key][i, j], np.float64) for key in (
                     "early_exitance", "early_second", "early_total", "early_error_total"))
-            # The late tally's own mean: the modelled tail beyond the full walks' cap is no tally.
-            tail = float(tables["tail_mass"][i, j]) * np.sqrt(float(tables["max_path"])) / 2 * tail_per_constant
-            late_tallied = np.maximum(late_total - tail, 0.0)
-            covariance = own_error**2 - late_tallied * own_sum / full                 # Cov(S, own)
-            w = np.clip(covariance / np.maximum(own_error**2 + new_error**2, 1e-300), 0.0, 1.0)
-            w[grid.absorption == 0] = 0.0
+            covariance = _own_covariance(tables, i, j, late_total, own_sum, own_error, tail_per_constant)
+            w = _blend_weight(covariance, own_error, new_error, grid.absorption)
             exitance[i, j] = np.maximum(exitance[i, j] + w[None, :, None] * (new - own), 0.0)
             total[i, j] = total[i, j] + w * (new_total - own_sum)
             error[i, j] = np.sqrt(np.maximum(error[i, j] ** 2 - 2 * w * covariance
@@ -173,7 +185,120 @@ def add_early(tables, *, photons, max_path=EARLY_MAX_PATH, progress=True, walked
                early_exitance=early_exitance.astype(np.float32), early_second=early_second.astype(np.float32),
                own_exitance=own_exitance.astype(np.float32), early_weight=weight, early_total=early_total,
                early_error_total=early_error, own_total=own_total, early_photons=np.int64(runs * EARLY_RUN),
-               early_max_path=np.float64(max_path), early_first_flight_rates=np.asarray(FIRST_FLIGHT_RATES))
+               early_max_path=np.float64(max_path), early_first_flight_rates=np.asarray(FIRST_FLIGHT_RATES),
+               early_turn_fraction=np.array([EARLY_TURN_FRACTION if _early_turn_of(g) else 0.0 for g in tables["gs"]]),
+               early_turns=np.int64(EARLY_TURNS))
+    return out
+
+
+def _early_turn_of(g):
+    """(fraction, events) of the early turns for the early walks of ``g``, or None."""
+    return (EARLY_TURN_FRACTION, EARLY_TURNS) if np.any(np.isclose(g, EARLY_TURN_GS)) else None
+
+
+BLEND_RAMP = 0.01  # a': the blend weight's onset, see _blend_weight
+
+
+def _blend_weight(covariance, own_error, new_error, absorption):
+    """The early walk's weight w per absorption node: the variance-minimising Cov(S, own) / (Var(own)
+    + Var(new)), times a' / (a' + ``BLEND_RAMP``).
+
+    w = 0 at a' = 0 keeps a medium that absorbs nothing returning exactly all light. The
+    variance-minimising w is already 0.06 at the first node (a' = 1e-5), and a jump there puts
+    w (new - own), noise of a few tenths of a percent, into the slope of every cell in a' at
+    sigma_a = 0: it had the exitance near the beam rise with absorption (g 0.8, eta 1). The
+    ramp brings the onset's slope to w / 0.01 (new - own), far below the cells' own (their mean
+    path, a few transport lengths), and costs nothing where the new walk matters (a' >= 1).
+    """
+    w = np.clip(covariance / np.maximum(own_error**2 + new_error**2, 1e-300), 0.0, 1.0)
+    return w * absorption / (absorption + BLEND_RAMP)
+
+
+def _own_covariance(tables, i, j, late_total, own_sum, own_error, tail_per_constant):
+    """Cov(S, own) of a shipped total S = late + own, per absorption node: Var(own) - E[late] E[own] / N."""
+    # The late tally's own mean: the modelled tail beyond the full walks' cap is no tally.
+    tail = float(tables["tail_mass"][i, j]) * np.sqrt(float(tables["max_path"])) / 2 * tail_per_constant
+    late_tallied = np.maximum(late_total - tail, 0.0)
+    return own_error**2 - late_tallied * own_sum / int(tables["photons"])
+
+
+def rewalk_early(tables, gs, *, extra_photons=0, walk=True, progress=True):
+    r"""Walk the early part of the ``gs`` rows of tables that hold one again and blend it anew.
+
+    Without ``extra_photons``: the same seeds and photons again, with early turns
+    (``EARLY_TURN_FRACTION`` of the scatterings among a photon's first ``EARLY_TURNS`` events
+    drawn uniformly over the sphere, :func:`jsss.transport.photon_walk._early_turn`). With it
+    (every g at once, so that ``early_photons`` holds for all): ``extra_photons`` more per
+    (eta, g) on the next seeds, walked as the row's early part was (turned or not), and pooled
+    with it. With ``walk=False``: nothing is walked, the rows are blended again (after a change
+    of :func:`_blend_weight`).
+
+    The shipped cells are T = S + w (new - own) (:func:`add_early`); with the full walks' own
+    short paths rerun (capped, as there) the blend is undone, S = T - w (new - own), and the
+    total's variance before it, Var(S) = Var(T) + 2 w Cov(S, own) - w^2 (Var(own) + Var(new)).
+    Then the new early part is blended by its own variance-minimising w. Rows of other g are
+    left as they are.
+    """
+    if "early_photons" not in tables:
+        raise SystemExit("--rewalk-gs and --more-early need tables with an early part (--early) first")
+    if extra_photons and not all(np.any(np.isclose(g, gs)) for g in tables["gs"]):
+        raise SystemExit("--more-early adds photons to every g (the file holds one early photon count)")
+    grid = TableGrid()
+    out = {key: (value.copy() if isinstance(value, np.ndarray) else value) for key, value in tables.items()}
+    seeds = [int(s) for s in np.atleast_1d(tables["seed"])]
+    full = int(tables["photons"])
+    runs = int(tables["early_photons"]) // EARLY_RUN
+    extra_runs = round(extra_photons / EARLY_RUN)
+    max_path = float(tables["early_max_path"])
+    tail_per_constant = tail_total_closed_form(grid.absorption, float(tables["max_path"]))
+    fraction = np.asarray(out.get("early_turn_fraction", np.zeros(len(tables["gs"]))), np.float64).copy()
+    exitance = out["exitance"].astype(np.float64)
+    for j, g in enumerate(tables["gs"]):
+        if not np.any(np.isclose(g, gs)):
+            continue
+        if walk and not extra_runs:
+            fraction[j] = EARLY_TURN_FRACTION
+        turn = (float(fraction[j]), EARLY_TURNS) if fraction[j] > 0 else None
+        for i, eta in enumerate(tables["etas"]):
+            start = time.perf_counter()
+            own, _, own_sum, own_error = _early_tables(eta, g, [_table_seed(s, eta, j) for s in seeds],
+                                                       full // len(seeds), max_path=max_path, grid=grid)
+            if not np.allclose(own_sum, tables["own_total"][i, j], rtol=1e-9, atol=1e-15):
+                raise SystemExit(f"eta {eta} g {g}: the full walks' short paths did not reproduce the file's own_total")
+            w_old = tables["early_weight"][i, j]
+            old = [np.asarray(tables[key][i, j], np.float64) for key in
+                   ("early_exitance", "early_second", "early_total", "early_error_total")]
+            shipped = exitance[i, j] - w_old[None, :, None] * (old[0] - own)
+            total_shipped = tables["total"][i, j] - w_old * (old[2] - own_sum)
+            covariance = _own_covariance(tables, i, j, total_shipped - own_sum, own_sum, own_error, tail_per_constant)
+            variance_shipped = (tables["error_total"][i, j] ** 2 + 2 * w_old * covariance
+                                - w_old**2 * (own_error**2 + old[3] ** 2))
+            walked = range(runs, runs + extra_runs) if extra_runs else range(runs)
+            if walk:
+                new, new_second, new_total, new_error = _early_tables(
+                    eta, g, [_early_seed(k, eta, j) for k in walked], EARLY_RUN, max_path=max_path, grid=grid,
+                    first_flight_rates=FIRST_FLIGHT_RATES, early_turn=turn)
+            else:
+                new, new_second, new_total, new_error = old
+            if walk and extra_runs:  # pool: means weighted by runs, the total's error as a mean's
+                a, b = runs / (runs + extra_runs), extra_runs / (runs + extra_runs)
+                new, new_second, new_total = a * old[0] + b * new, a * old[1] + b * new_second, a * old[2] + b * new_total
+                new_error = np.hypot(a * old[3], b * new_error)
+            w = _blend_weight(covariance, own_error, new_error, grid.absorption)
+            exitance[i, j] = np.maximum(shipped + w[None, :, None] * (new - own), 0.0)
+            out["total"][i, j] = total_shipped + w * (new_total - own_sum)
+            out["error_total"][i, j] = np.sqrt(np.maximum(variance_shipped - 2 * w * covariance
+                                                          + w**2 * (own_error**2 + new_error**2), 0.0))
+            out["early_exitance"][i, j], out["early_second"][i, j] = new, new_second
+            out["early_total"][i, j], out["early_error_total"][i, j], out["early_weight"][i, j] = new_total, new_error, w
+            if progress:
+                k = np.searchsorted(grid.absorption, 40.0)
+                print(f"eta {eta} g {g}: early part walked again, total at a' = {grid.absorption[k]:.3g} "
+                      f"{tables['total'][i, j, k]:.6f} +- {tables['error_total'][i, j, k]:.1e} -> "
+                      f"{out['total'][i, j, k]:.6f} +- {out['error_total'][i, j, k]:.1e} (w {w[k]:.3f}), "
+                      f"{time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
+    out.update(exitance=exitance.astype(np.float32), early_turn_fraction=fraction, early_turns=np.int64(EARLY_TURNS),
+               early_photons=np.int64((runs + (extra_runs if walk else 0)) * EARLY_RUN))
     return out
 
 
@@ -283,6 +408,15 @@ def main():
                         help="add the early part's radiance toward exact view directions (next-event estimates of "
                              "PHOTONS photons per eta and g) to the tables of --tables (those of --etas)")
     parser.add_argument("--tables", type=Path, default=DEFAULT_OUT, help="the full tables --early adds to")
+    parser.add_argument("--rewalk-gs", metavar="GS",
+                        help="walk the early part of these g (comma-separated) in --tables again, with early turns "
+                             f"(the shipped {','.join(str(g) for g in EARLY_TURN_GS)}), and blend it anew")
+    parser.add_argument("--more-early", type=int, metavar="PHOTONS",
+                        help="add PHOTONS more early photons per eta and g to --tables (next seeds, each row walked "
+                             "as before) and blend again")
+    parser.add_argument("--reblend", action="store_true",
+                        help="blend the early part of --tables again (its walks kept: minutes), after a change of "
+                             "the blend's weight")
     parser.add_argument("--walked", type=Path, help="take --early's new walk from this earlier output (its early_* "
                                                     "arrays) instead of walking it again")
     args = parser.parse_args()
@@ -293,6 +427,14 @@ def main():
         tables = {key: (value[keep] if np.ndim(value) >= 1 and value.shape[0] == n_etas and key != "seed" else value)
                   for key, value in tables.items()}
         tables = add_views(tables, photons=args.views)
+    elif args.rewalk_gs:
+        tables = rewalk_early(dict(np.load(args.tables)), [float(g) for g in args.rewalk_gs.split(",")])
+    elif args.reblend:
+        tables = dict(np.load(args.tables))
+        tables = rewalk_early(tables, [float(g) for g in tables["gs"]], walk=False)
+    elif args.more_early:
+        tables = dict(np.load(args.tables))
+        tables = rewalk_early(tables, [float(g) for g in tables["gs"]], extra_photons=args.more_early)
     elif args.early or args.walked:
         tables = dict(np.load(args.tables))
         keep = np.flatnonzero(np.isin(np.round(tables["etas"], 6), [round(float(e), 6) for e in args.etas.split(",")]))

@@ -26,7 +26,10 @@ and below weight 1e-4 Russian roulette keeps one photon in ten at ten times the 
 An optional tenth entry of ``params`` (rates, after the start cosine) draws each photon's first
 free path from a mixture of faster exponentials, with its importance weight
 (:func:`_first_flight`): the transport tables' early walks use it to sample the short paths of
-a strongly absorbing medium.
+a strongly absorbing medium. Optional eleventh and twelfth entries (a fraction, a count K) draw
+the direction of the scatterings among a photon's first K events from HG mixed with the uniform
+sphere (:func:`_early_turn`): the same walks use them where the phase function is peaked
+forward, whose low-albedo light needs an early turn back.
 """
 
 from __future__ import annotations
@@ -179,6 +182,30 @@ def _first_flight(u_path, sigma_t, rates):
     return s, weight, survival
 
 
+def _henyey_greenstein_density(g, cos_theta):
+    r"""The HG density of the scattering cosine, :math:`\frac{1 - g^2}{2 (1 + g^2 - 2 g \mu)^{3/2}}` (integrates to 1 over [-1, 1])."""
+    return (1 - g**2) / (2 * (1 + g**2 - 2 * g * cos_theta) ** 1.5)
+
+
+def _early_turn(g, u_theta, fraction):
+    r"""The cosine of an early scattering, drawn from :math:`q = (1 - \beta) p_\mathrm{HG} + \beta / 2`, and its weight :math:`p_\mathrm{HG} / q`.
+
+    At g = 0.9 a photon scatters back (cosine below 0) once in 44, and a strongly absorbing
+    medium returns light almost only through such a turn within its first collisions, near the
+    surface (where the first flight's mixture puts the first one). With a fraction
+    :math:`\beta` of the early turns drawn uniformly over the sphere, about :math:`\beta / 2`
+    of them turn back; the weight, at most :math:`1 / (1 - \beta)` per turn (defensive
+    mixing), keeps every tally unbiased. ``u_theta`` picks the component and, rescaled, the
+    cosine; at g = 0 the weight is 1.
+    """
+    uniform = u_theta < fraction
+    u_uniform = u_theta / jnp.where(fraction > 0, fraction, 1.0)
+    u_hg = jnp.clip((u_theta - fraction) / (1 - fraction), 0.0, 1.0)
+    cos_theta = jnp.where(uniform, jnp.clip(2 * u_uniform - 1, -1.0, 1.0), sample_henyey_greenstein(g, u_hg))
+    density = _henyey_greenstein_density(g, cos_theta)
+    return cos_theta, density / ((1 - fraction) * density + fraction / 2)
+
+
 def _event_words(key, photon, steps):
     """The four random uint32 words of event ``steps`` of ``photon``: (path, turn, phi, roulette).
 
@@ -245,7 +272,13 @@ def _event(lane: _Lane, key, params) -> _Lane:
     ratio = n1 / n2
     cos_t = jnp.sqrt(jnp.maximum(1 - ratio**2 * (1 - dz**2), 0.0))
     # Collision: absorb by weight, scatter by HG, roulette below 1e-4.
-    sx, sy, sz = _scatter(lane.ux, lane.uy, dz, sample_henyey_greenstein(_at_layer(g, layer), u_theta), u_phi)
+    cos_theta = sample_henyey_greenstein(_at_layer(g, layer), u_theta)
+    turning = len(params) > 10  # static: optional 11th and 12th entries, the early turns' uniform fraction and count
+    if turning:
+        early_turn = (lane.steps < params[11]) & ~hits
+        cos_early, turn_weight = _early_turn(_at_layer(g, layer), u_theta, params[10])
+        cos_theta = jnp.where(early_turn, cos_early, cos_theta)
+    sx, sy, sz = _scatter(lane.ux, lane.uy, dz, cos_theta, u_phi)
     collided_weight = lane.weight * _at_layer(albedo, layer)
     low = collided_weight < 1e-4
     collided_weight = jnp.where(low, jnp.where(u_roulette < 0.1, collided_weight * 10, 0.0), collided_weight)
@@ -260,6 +293,8 @@ def _event(lane: _Lane, key, params) -> _Lane:
     if importance:
         factor = jnp.where(hits, first_survival(to_boundary), first_weight(s))
         new_weight = jnp.where(first, new_weight * factor, new_weight)
+    if turning:
+        new_weight = jnp.where(early_turn, new_weight * turn_weight, new_weight)
     side = jnp.where(leaves, jnp.where(up, 1, 2), jnp.where(new_weight == 0, 3, 0)).astype(jnp.int32)
     return _Lane(x, y, z, new_ux, new_uy, new_uz, new_weight, side,
                  jnp.where(leaves, jnp.hypot(x, y), lane.exit_r),
@@ -331,8 +366,9 @@ def run_walk(params, *, n_photons: int, lanes: int = 4096, max_steps: int = 2000
     arrays of one dtype (see :mod:`jsss.transport.montecarlo`), optionally followed by the cosine at which
     photons start inside (an oblique beam after refraction; default 1, along the normal) and by
     the first flight's rates (:func:`_first_flight`; each record's weight then carries the
-    importance weight). A photon still inside after ``max_steps`` events or ``max_path`` [mm] of path is recorded as
-    lost (side 0). With ``progress`` a line per chunk goes to stderr (a script's choice: the
+    importance weight) and by the early turns' uniform fraction and count of events
+    (:func:`_early_turn`, weighted too). A photon still inside after ``max_steps`` events or
+    ``max_path`` [mm] of path is recorded as lost (side 0). With ``progress`` a line per chunk goes to stderr (a script's choice: the
     library prints nothing by default).
     """
     dtype = params[0].dtype
