@@ -166,6 +166,34 @@ def test_a_model_value_at_a_node_carries_its_cells_error_and_eta_mixes_tables_in
     np.testing.assert_allclose(np.exp(mixed), by_hand, rtol=1e-9)
 
 
+def _capped_walk_tables(runs, photons, cap):
+    """``tabulate`` of walks capped at ``cap`` transport lengths, one per (params, seed) in ``runs``."""
+    grid = TableGrid()
+    tables = []
+    for params, seed in runs:
+        records = run_walk(params, n_photons=photons, lanes=1024, max_steps=2**31 - 1, max_path=cap, seed=seed)
+        tables.append(tabulate(records.radius, records.path, records.exit_cos, records.side == 1,
+                               records.side == 0, grid=grid, max_path=cap, model_tail=False, weight=records.weight))
+    return tables
+
+
+def _assert_totals_and_cells_agree(before, after, photons, cell_nodes):
+    """Two walks of one medium agree: totals within 4 combined errors at every absorption node;
+    the radius x exit-angle cells both resolve (errors below 20 %) at the nodes ``cell_nodes``
+    within 5, with an RMS z of 1 (+-0.25)."""
+    grid = TableGrid()
+    z = (after["total"] - before["total"]) / np.hypot(after["error_total"], before["error_total"])
+    assert np.max(np.abs(z)) < 4, z
+    for j in (_absorption_index(a) for a in cell_nodes):
+        errors = [np.sqrt(np.maximum(t["second"][:, j] / grid.annulus_area[:, None] - t["exitance"][:, j] ** 2, 0)
+                          / photons) for t in (before, after)]
+        resolved = (errors[0] < 0.2 * before["exitance"][:, j]) & (errors[1] < 0.2 * after["exitance"][:, j])
+        assert resolved.sum() > 50, resolved.sum()
+        cell_z = (after["exitance"][:, j] - before["exitance"][:, j]) / np.hypot(*errors)
+        assert np.max(np.abs(cell_z[resolved])) < 5
+        assert np.sqrt(np.mean(cell_z[resolved] ** 2)) == pytest.approx(1.0, abs=0.25), (resolved.sum(), cell_z[resolved])
+
+
 def test_an_importance_sampled_first_flight_keeps_the_tables_and_sharpens_a_low_albedo():
     """The tables' early walks draw the first free path from a mixture of faster exponentials and
     weigh it (``photon_walk._first_flight``). Against a plain walk of the same photons (other
@@ -180,27 +208,12 @@ def test_an_importance_sampled_first_flight_keeps_the_tables_and_sharpens_a_low_
     grid = TableGrid()
     params = _params([Medium(0.0, 1.0, eta)], [np.inf], g=0.0, eta_above=1 / eta, eta_below=1 / eta, relative=True)
     weighted = params + (jnp.asarray(1.0), jnp.asarray([1.0, 1.0, 1.0, 10.0, 100.0, 1000.0]))
-    tables = []
-    for p, seed in ((params, 90_011), (weighted, 90_012)):
-        records = run_walk(p, n_photons=photons, lanes=1024, max_steps=2**31 - 1, max_path=cap, seed=seed)
-        tables.append(tabulate(records.radius, records.path, records.exit_cos, records.side == 1,
-                               records.side == 0, grid=grid, max_path=cap, model_tail=False, weight=records.weight))
-    plain, sampled = tables
-    z = (sampled["total"] - plain["total"]) / np.hypot(sampled["error_total"], plain["error_total"])
-    assert np.max(np.abs(z)) < 4, z
+    plain, sampled = _capped_walk_tables([(params, 90_011), (weighted, 90_012)], photons, cap)
+    # Cells at a' = 1 and 10 (measured: 223 and 90 resolved, RMS z 1.02 and 1.08).
+    _assert_totals_and_cells_agree(plain, sampled, photons, (1.0, 10.0))
     high = grid.absorption >= 40
     assert np.all(plain["error_total"][high] / plain["total"][high]
                   > 3 * sampled["error_total"][high] / sampled["total"][high])
-    # Cells: radius x exit angle at a' = 1 and 10, where both walks resolve them (errors below 20 %;
-    # measured: 223 and 90 cells, RMS z 1.02 and 1.08).
-    for j in (_absorption_index(1.0), _absorption_index(10.0)):
-        errors = [np.sqrt(np.maximum(t["second"][:, j] / grid.annulus_area[:, None] - t["exitance"][:, j] ** 2, 0)
-                          / photons) for t in tables]
-        resolved = (errors[0] < 0.2 * plain["exitance"][:, j]) & (errors[1] < 0.2 * sampled["exitance"][:, j])
-        assert resolved.sum() > 50, resolved.sum()
-        cell_z = (sampled["exitance"][:, j] - plain["exitance"][:, j]) / np.hypot(*errors)
-        assert np.max(np.abs(cell_z[resolved])) < 5
-        assert np.sqrt(np.mean(cell_z[resolved] ** 2)) == pytest.approx(1.0, abs=0.25), (resolved.sum(), cell_z[resolved])
 
 
 def test_an_early_turn_weighs_its_cosines_back_to_henyey_greenstein():
@@ -225,7 +238,7 @@ def test_an_early_turn_weighs_its_cosines_back_to_henyey_greenstein():
 
 
 def test_early_turns_keep_the_tables_and_sharpen_a_low_albedo_at_g_09():
-    """The early walks of g 0.8 and 0.9 also draw the scatterings among a photon's first 3 events
+    """The early walks of g 0.5, 0.8 and 0.9 also draw the scatterings among a photon's first 3 events
     from HG mixed with the uniform sphere (35 %), and weigh them. Against the same walk without
     them (first flights weighted in both; other seeds), at eta 1.3, g 0.9, capped at 4 transport
     lengths: the totals agree within 4 combined standard errors at every absorption node, the
@@ -239,22 +252,8 @@ def test_early_turns_keep_the_tables_and_sharpen_a_low_albedo_at_g_09():
     params = _params([Medium(0.0, 1.0, eta)], [np.inf], g=0.9, eta_above=1 / eta, eta_below=1 / eta, relative=True)
     plain = params + (jnp.asarray(1.0), jnp.asarray([1.0, 1.0, 1.0, 10.0, 100.0, 1000.0]))
     turned = plain + (jnp.asarray(0.35), jnp.asarray(3, jnp.int32))
-    tables = []
-    for p, seed in ((plain, 90_021), (turned, 90_022)):
-        records = run_walk(p, n_photons=photons, lanes=1024, max_steps=2**31 - 1, max_path=cap, seed=seed)
-        tables.append(tabulate(records.radius, records.path, records.exit_cos, records.side == 1,
-                               records.side == 0, grid=grid, max_path=cap, model_tail=False, weight=records.weight))
-    before, after = tables
-    z = (after["total"] - before["total"]) / np.hypot(after["error_total"], before["error_total"])
-    assert np.max(np.abs(z)) < 4, z
+    before, after = _capped_walk_tables([(plain, 90_021), (turned, 90_022)], photons, cap)
+    _assert_totals_and_cells_agree(before, after, photons, (1.0, 4.0))
     low = (grid.absorption >= 10) & (grid.absorption <= 160)
     assert np.all(before["error_total"][low] / before["total"][low]
                   > 2 * after["error_total"][low] / after["total"][low])
-    for j in (_absorption_index(1.0), _absorption_index(4.0)):
-        errors = [np.sqrt(np.maximum(t["second"][:, j] / grid.annulus_area[:, None] - t["exitance"][:, j] ** 2, 0)
-                          / photons) for t in tables]
-        resolved = (errors[0] < 0.2 * before["exitance"][:, j]) & (errors[1] < 0.2 * after["exitance"][:, j])
-        assert resolved.sum() > 50, resolved.sum()
-        cell_z = (after["exitance"][:, j] - before["exitance"][:, j]) / np.hypot(*errors)
-        assert np.max(np.abs(cell_z[resolved])) < 5
-        assert np.sqrt(np.mean(cell_z[resolved] ** 2)) == pytest.approx(1.0, abs=0.25), (resolved.sum(), cell_z[resolved])
