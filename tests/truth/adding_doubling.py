@@ -10,7 +10,7 @@ had been read as the tables' (issue 37: "1.8 % at g 0.9").
 More points need a stable rule. iadpython builds its Radau weights from
 ``scipy.special.legendre(n - 1).deriv()``, a polynomial in the power basis whose coefficients
 lose precision as n grows: against closed-form moments its weights are 2.6e-6 off at 24
-points, 3 % at 32 and meaningless past 40 (iadpython 0.6), and at eta 1 it uses Radau over all
+points, 3 % at 32 and meaningless past 40 (iadpython 0.5.3), and at eta 1 it uses Radau over all
 points. :func:`gauss_radau` takes nodes and weights from the three-term recurrence
 (``scipy.special.eval_legendre``) instead: exact to 1e-12 on polynomials of degree 2n - 2 up
 to n = 128, and :func:`slab_rt` runs iadpython with it.
