@@ -7,6 +7,7 @@ tables do not reach.
 """
 
 import dataclasses
+import re
 
 import jax
 import numpy as np
@@ -60,19 +61,38 @@ def test_auto_weighs_the_dipole_against_the_scenes_own_target():
     assert "> a quarter of the target (0.25 %)" in plan_scene(fine).describe()
 
 
+def _stated_dipole_errors(text):
+    """The three relative errors a plan prints for the dipole's R_d (R / G / B)."""
+    found = re.search(r"the dipole's R_d is ([+-][\d.]+) / ([+-][\d.]+) / ([+-][\d.]+) % off the transport "
+                      r"truth's \(R / G / B\)", text)
+    assert found, text
+    return np.array([float(x) for x in found.groups()]) / 100
+
+
+def _ketchups_dipole_error():
+    """Ketchup's dipole R_d against adding-doubling, with nothing of the tables: +10.9 / +17.6 / +17.2 %."""
+    medium = materials.material("ketchup")
+    return np.asarray(dipole.total_reflectance(medium)) / _adding_doubling_total(medium) - 1
+
+
 def test_a_scene_defaults_to_auto_and_the_plan_says_why():
+    """The plan names the profile, why, and the dipole's error it weighed: the printed numbers are
+    the truth's within 0.3 % (the tables' own error at ketchup's albedos is below 0.15 %; the
+    print rounds to 0.1 %)."""
     scene = parse_scene(scene_dict(material={"name": "ketchup"}))
     assert scene.material.profile_model == "transport"
     text = plan_scene(scene).describe()
-    assert ("profile: transport -- auto: the dipole's R_d is +11.0 / +17.6 / +17.2 % off the transport truth's "
-            "(R / G / B), > a quarter of the target (2.5 %)") in text
+    assert "profile: transport -- auto: the dipole's R_d is " in text
+    assert "off the transport truth's (R / G / B), > a quarter of the target (2.5 %)" in text
+    np.testing.assert_allclose(_stated_dipole_errors(text), _ketchups_dipole_error(), atol=3e-3)
 
 
 def test_an_explicit_dipole_is_obeyed_and_its_error_stated():
     scene = parse_scene(scene_dict(material={"name": "ketchup", "profile": "dipole"}))
     assert scene.material.profile_model == "dipole"
     line = plan_scene(scene).profile.describe()
-    assert line.startswith("profile: dipole -- set by the scene; predicted error: the dipole's R_d is +11.0")
+    assert line.startswith("profile: dipole -- set by the scene; predicted error: the dipole's R_d is ")
+    np.testing.assert_allclose(_stated_dipole_errors(line), _ketchups_dipole_error(), atol=3e-3)
     assert 'profile = "transport" removes it' in line
 
 
