@@ -168,11 +168,9 @@ def add_early(tables, *, photons, max_path=EARLY_MAX_PATH, progress=True, walked
                 new, new_second, new_total, new_error = (np.asarray(walked[key][i, j], np.float64) for key in (
                     "early_exitance", "early_second", "early_total", "early_error_total"))
             covariance = _own_covariance(tables, i, j, late_total, own_sum, own_error, tail_per_constant)
-            w = _blend_weight(covariance, own_error, new_error, grid.absorption)
-            exitance[i, j] = np.maximum(exitance[i, j] + w[None, :, None] * (new - own), 0.0)
-            total[i, j] = total[i, j] + w * (new_total - own_sum)
-            error[i, j] = np.sqrt(np.maximum(error[i, j] ** 2 - 2 * w * covariance
-                                             + w**2 * (own_error**2 + new_error**2), 0.0))
+            exitance[i, j], total[i, j], error[i, j], w = _blend(
+                exitance[i, j], total[i, j], error[i, j] ** 2, (own, own_sum, own_error),
+                (new, new_total, new_error), covariance, grid.absorption)
             early_exitance[i, j], early_second[i, j], own_exitance[i, j] = new, new_second, own
             early_total[i, j], early_error[i, j], own_total[i, j], weight[i, j] = new_total, new_error, own_sum, w
             if progress:
@@ -214,6 +212,18 @@ def _blend_weight(covariance, own_error, new_error, absorption):
     return w * absorption / (absorption + BLEND_RAMP)
 
 
+def _blend(cells, total, variance, own_part, new_part, covariance, absorption):
+    """Shipped cells, total and the total's variance (S, unblended) joined to the early walk:
+    T = S + w (new - own), Var(T) = Var(S) - 2 w Cov(S, own) + w^2 (Var(own) + Var(new)), w of
+    :func:`_blend_weight`. ``own_part``, ``new_part``: (cells, total, total's error). Returns
+    (cells, total, total's error, w)."""
+    own, own_total, own_error = own_part
+    new, new_total, new_error = new_part
+    w = _blend_weight(covariance, own_error, new_error, absorption)
+    return (np.maximum(cells + w[None, :, None] * (new - own), 0.0), total + w * (new_total - own_total),
+            np.sqrt(np.maximum(variance - 2 * w * covariance + w**2 * (own_error**2 + new_error**2), 0.0)), w)
+
+
 def _own_covariance(tables, i, j, late_total, own_sum, own_error, tail_per_constant):
     """Cov(S, own) of a shipped total S = late + own, per absorption node: Var(own) - E[late] E[own] / N."""
     # The late tally's own mean: the modelled tail beyond the full walks' cap is no tally.
@@ -240,7 +250,7 @@ def rewalk_early(tables, gs, *, extra_photons=0, walk=True, progress=True):
     left as they are.
     """
     if "early_photons" not in tables:
-        raise SystemExit("--rewalk-gs and --more-early need tables with an early part (--early) first")
+        raise SystemExit("--rewalk-gs, --more-early and --reblend need tables with an early part (--early) first")
     if extra_photons and not all(np.any(np.isclose(g, gs)) for g in tables["gs"]):
         raise SystemExit("--more-early adds photons to every g (the file holds one early photon count)")
     grid = TableGrid()
@@ -284,11 +294,9 @@ def rewalk_early(tables, gs, *, extra_photons=0, walk=True, progress=True):
                 a, b = runs / (runs + extra_runs), extra_runs / (runs + extra_runs)
                 new, new_second, new_total = a * old[0] + b * new, a * old[1] + b * new_second, a * old[2] + b * new_total
                 new_error = np.hypot(a * old[3], b * new_error)
-            w = _blend_weight(covariance, own_error, new_error, grid.absorption)
-            exitance[i, j] = np.maximum(shipped + w[None, :, None] * (new - own), 0.0)
-            out["total"][i, j] = total_shipped + w * (new_total - own_sum)
-            out["error_total"][i, j] = np.sqrt(np.maximum(variance_shipped - 2 * w * covariance
-                                                          + w**2 * (own_error**2 + new_error**2), 0.0))
+            exitance[i, j], out["total"][i, j], out["error_total"][i, j], w = _blend(
+                shipped, total_shipped, variance_shipped, (own, own_sum, own_error), (new, new_total, new_error),
+                covariance, grid.absorption)
             out["early_exitance"][i, j], out["early_second"][i, j] = new, new_second
             out["early_total"][i, j], out["early_error_total"][i, j], out["early_weight"][i, j] = new_total, new_error, w
             if progress:

@@ -658,10 +658,9 @@ def cell_relative_variance(values, absorption, area, photons, second=None):
         undershoot that bound at a' > 100 near the source, where it is used instead. Measured
         ``second`` moments are taken as they are: under importance weights the value at a' = 0
         is not that bound (the early walks' early turns: it overstated their errors at a' 1-2.5
-        by up to 17 %). The
-        shipped cells include the modelled tail beyond the walk's cap, which is not a tally;
-        read as one, it adds its share of a cell to that cell's variance (at a' = 0 a few
-        percent of the cells' value near rho' = 10, less inside).
+        by up to 17 %). The shipped cells include the modelled tail beyond the walk's cap,
+        which is not a tally; read as one, it adds its share of a cell to that cell's variance
+        (at a' = 0 a few percent of the cells' value near rho' = 10, less inside).
     """
     values = np.asarray(values, float)
     identity = second is None
