@@ -31,6 +31,7 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from ..numerics import is_concrete
 
@@ -181,6 +182,7 @@ def _shifted_lerp(values, axis: int, wrap: bool):
     return read
 
 
+@functools.partial(jax.custom_jvp, nondiff_argnums=(3, 4, 5))
 def _blur_pass(texture, mask, spacing, axis: int, taps: int, wrap: bool):
     """One normalised 1D pass. ``spacing`` per texel (H, W) reads each tap by gathers; one
     scalar spacing for every texel (a uniform stretch) reads it by shifted slices.
@@ -190,18 +192,25 @@ def _blur_pass(texture, mask, spacing, axis: int, taps: int, wrap: bool):
     recomputed every tap's reads once for the numerator and once for the weight, and the
     spacing's table search inside every gather. A loop's carry is materialised between taps:
     one pass on 512^2 x 4 went from 50 to 7 ms.
+
+    Its derivative in the texture alone (:func:`_blur_pass_jvp`) is the pass without the
+    mask's channel, divided by the primal's weight.
     """
+    return _normalised_pass(texture, mask, spacing, axis, taps, wrap)[0]
+
+
+def _taps(values, spacing, axis: int, taps: int, wrap: bool):
+    r""":math:`\sum_k w_k\,v(i + x_k s_i)` along ``axis``: the pass's weighted reads of ``values`` (H, W, C)."""
     offsets, weights = kernel(taps)
-    stacked = jnp.concatenate([texture * mask[..., None], mask[..., None]], axis=-1)
     if jnp.ndim(spacing) == 0:
-        shifted = _shifted_lerp(stacked, axis, wrap)
+        shifted = _shifted_lerp(values, axis, wrap)
 
         def read(k):  # the tap k spacings away, for every texel at once
             return shifted(k * spacing)
     else:
-        index = jnp.arange(texture.shape[axis], dtype=spacing.dtype)
+        index = jnp.arange(values.shape[axis], dtype=spacing.dtype)
         base = index[:, None] if axis == 0 else index[None, :]
-        gathered = _gathered_lerp(stacked, axis, wrap)
+        gathered = _gathered_lerp(values, axis, wrap)
 
         def read(k):
             return gathered(base + k * spacing)
@@ -210,11 +219,40 @@ def _blur_pass(texture, mask, spacing, axis: int, taps: int, wrap: bool):
         offset, weight = offset_weight
         return total + weight * read(offset), None
 
-    dtype = texture.dtype
-    total, _ = jax.lax.scan(tap, jnp.zeros_like(stacked), (jnp.asarray(offsets, dtype), jnp.asarray(weights, dtype)))
+    dtype = values.dtype
+    total, _ = jax.lax.scan(tap, jnp.zeros_like(values), (jnp.asarray(offsets, dtype), jnp.asarray(weights, dtype)))
+    return total
+
+
+def _normalised_pass(texture, mask, spacing, axis: int, taps: int, wrap: bool):
+    """The pass and its weight (the mask's own sum): texture and mask read together, as one
+    (H, W, C + 1) array (a frame's forward pass: on 512^2 float32 4.3 ms against 7.1 ms apart)."""
+    stacked = jnp.concatenate([texture * mask[..., None], mask[..., None]], axis=-1)
+    total = _taps(stacked, spacing, axis, taps, wrap)
     numerator, weight = total[..., :-1], total[..., -1:]
     has = weight > 1e-12
-    return jnp.where(has, numerator / jnp.where(has, weight, 1.0), 0.0) * mask[..., None]
+    return jnp.where(has, numerator / jnp.where(has, weight, 1.0), 0.0) * mask[..., None], weight
+
+
+def _blur_pass_jvp(axis, taps, wrap, primals, tangents):
+    """In the texture alone (a fit's J v and, transposed, J^T w) the pass is linear with the
+    primal's weight: the tangent's reads carry its C channels, not the mask's zero one, and no
+    derivative of the normalisation (a 96^2 x 3 float64 step: J v 0.67 -> 0.38 ms, J^T w 0.85 ->
+    0.43 ms). Where the mask or the spacing has a tangent too, JAX differentiates the pass itself."""
+    texture, mask, spacing = primals
+    d_texture, d_mask, d_spacing = tangents
+    if not (type(d_mask) is SymbolicZero and type(d_spacing) is SymbolicZero):
+        instantiated = tuple(jnp.zeros(t.shape, t.dtype) if type(t) is SymbolicZero else t for t in tangents)
+        return jax.jvp(lambda *a: _normalised_pass(*a, axis, taps, wrap)[0], primals, instantiated)
+    out, weight = _normalised_pass(texture, mask, spacing, axis, taps, wrap)
+    if type(d_texture) is SymbolicZero:
+        return out, jnp.zeros_like(out)
+    has = weight > 1e-12
+    numerator = _taps(d_texture * mask[..., None], spacing, axis, taps, wrap)
+    return out, jnp.where(has, numerator / jnp.where(has, weight, 1.0), 0.0) * mask[..., None]
+
+
+_blur_pass.defjvp(_blur_pass_jvp, symbolic_zeros=True)
 
 
 def _per_axis(stretch, shape):

@@ -180,3 +180,33 @@ def test_one_uniform_axis_reads_by_slices_and_equals_the_per_texel_map():
 
         assert float(jax.grad(loss)(variance, axes)) == pytest.approx(
             float(jax.grad(loss)(variance, jnp.asarray(per_texel))), rel=1e-9)
+
+
+@pytest.mark.parametrize("wrap_u", [False, True])
+@pytest.mark.parametrize("uniform", [True, False])
+def test_derivatives_in_the_texture_are_the_blur_itself(wrap_u, uniform):
+    """A blur step is linear in the texture (the mask's weight does not depend on it), so its
+    derivative along v is the step of v, and its transpose satisfies <J v, w> = <v, J^T w>.
+    The pass's own derivative rule (the mask's channel left out) is checked against both, with
+    holes in the mask, and against finite differences where the mask is differentiated too."""
+    rng = np.random.default_rng(11)
+    tex = jnp.asarray(rng.uniform(size=(40, 37, 3)))
+    v, w = (jnp.asarray(rng.standard_normal((40, 37, 3))) for _ in range(2))
+    mask = jnp.asarray((rng.uniform(size=(40, 37)) > 0.2).astype(float))
+    stretch = jnp.asarray([0.5, 0.25]) if uniform else jnp.asarray(0.25 + 0.2 * rng.uniform(size=(40, 37, 2)))
+    for variance in (0.03, 2.0, 40.0):
+        def step(t, m=mask, variance=variance):
+            return blur_step(t, m, stretch, variance, wrap_u=wrap_u)
+
+        _, jv = jax.jvp(step, (tex,), (v,))
+        assert np.abs(np.asarray(jv) - np.asarray(step(v))).max() < 1e-12
+        _, pull = jax.vjp(step, tex)
+        jtw = pull(w)[0]
+        assert float(jnp.sum(jv * w)) == pytest.approx(float(jnp.sum(v * jtw)), rel=1e-12)
+        # the mask differentiated too (its own path): central differences of a smooth mask
+        smooth = mask * 0.5 + 0.25
+        dm = jnp.asarray(rng.standard_normal(mask.shape))
+        _, both = jax.jvp(step, (tex, smooth), (v, dm))
+        h = 1e-6
+        fd = (step(tex + h * v, smooth + h * dm) - step(tex - h * v, smooth - h * dm)) / (2 * h)
+        assert np.abs(np.asarray(both) - np.asarray(fd)).max() < 1e-7 * max(1.0, float(jnp.abs(fd).max()))
