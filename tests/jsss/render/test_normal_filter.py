@@ -97,6 +97,8 @@ def test_the_library_writes_no_spectrum_file_unless_asked(tmp_path, monkeypatch)
 
     for name in ("HOME", "XDG_CACHE_HOME", "JSSS_CACHE_DIR"):
         monkeypatch.setenv(name, str(tmp_path / name))
+    # as a library user's process: no console command (an earlier test's, in this worker) named a folder
+    monkeypatch.setattr(nf, "_spectra_dir", None)
     mesh = uv_sphere(4.0, segments=12, rings=6)
     first = laplacian_spectrum(mesh, 5)
     assert not any(tmp_path.rglob("*"))
