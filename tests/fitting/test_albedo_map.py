@@ -198,3 +198,32 @@ def test_the_command_names_a_flag_the_map_fit_cannot_take(tmp_path, capsys, flag
     assert render_command.main(argv) == 2
     err = capsys.readouterr().err
     assert named in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_a_second_fit_of_the_same_scene_compiles_none_of_the_fits_programs(caplog):
+    """The fit's programs (residuals, images, diagonal, solves) are kept per structure, with the
+    geometry's arrays as arguments: a second photo of the same scene traces and compiles none of
+    them again (they had been closures per fit: 22 s of a 66 s fit recompiled every call). The
+    options are this test's own (cg_max_steps), so that the first call must compile them."""
+    import logging
+
+    import jax
+
+    scene = parse_scene(tomllib.loads(SMALL), source="plane.toml")
+    painted = dataclasses.replace(scene, material=dataclasses.replace(scene.material, maps=SurfaceMaps(albedo=_checker(4))))
+    clean = np.asarray(render(painted, without_legs(plan_scene(painted, accuracy=0.001, method="texture-space")),
+                              dtype=jnp.float64).radiance)
+    options = {"gain": 1.0, "noise": 0.01, "map_size": 4, "errors": "none", "replans": 0, "max_steps": 2,
+               "cg_max_steps": 77}
+    compiled = []
+    for seed in (3, 4):
+        photo = clean * (1 + 0.01 * np.random.default_rng(seed).standard_normal(clean.shape))
+        caplog.clear()
+        with jax.log_compiles(True), caplog.at_level(logging.WARNING, logger="jax"):
+            fit = fit_albedo_map(scene, photo, **options)
+        assert np.all(np.isfinite(fit.albedo))
+        compiled.append({m.split("jit(")[1].split(")")[0] for m in (r.getMessage() for r in caplog.records)
+                         if m.startswith("Compiling jit(")})
+    programs = {"raw_residuals", "_images", "_diagonal", "_solve"}
+    assert programs <= compiled[0], compiled[0]
+    assert not programs & compiled[1], compiled[1]
