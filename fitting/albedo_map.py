@@ -32,12 +32,13 @@ Solver: Gauss-Newton on the whitened residuals :math:`r = (g L - I)/s`, each ste
 equations :math:`J^T J\,\delta = -J^T r` solved by conjugate gradients (:class:`lineax.CG`)
 on :math:`v \mapsto J^T (J v)` from :func:`jax.linearize` and its transpose: the Jacobian is never
 formed. CG runs on the system scaled by its diagonal, :math:`D^{-1/2} A D^{-1/2}`, whose texel
-entries are probed at each step (nine products: the map coloured on a 3 x 3 lattice, random
-signs per colour) and whose mean free path entries are exact (one JVP); a halving line search.
-Each step's CG stops at Eisenstat and Walker's (1996, choice 2) forcing term, from 0.5 far from
-the minimum down to ``cg_rtol`` as the gradient falls, and the fit ends only on a step solved
-to ``cg_rtol`` (on the tests' plane: CG 2890 -> 1895 iterations, same result to 0.001 in the
-mean free path). The programs (residuals, images, diagonal, solves) are compiled once per
+entries are probed (nine products: the map coloured on a 3 x 3 lattice, random signs per
+colour; again once the unknowns moved by :data:`DIAGONAL_DRIFT`) and whose mean free path entries
+are exact (one JVP); a halving line search. Each step's CG stops at Eisenstat and Walker's (1996,
+choice 2) forcing term, from 0.5 far from the minimum down to ``cg_rtol`` as the gradient falls,
+and the fit ends only on a step solved to ``cg_rtol``; a round before the last (its mean free path
+only refreshes the frame) ends on a loose step (on the tests' plane: CG 2890 -> 1533 iterations,
+the result within its errors). The programs (residuals, images, diagonal, solves) are compiled once per
 *structure* -- map size, the plan's layout of the geometry (:mod:`jsss.render.programs`), dtypes
 -- and kept across fits, with the geometry's arrays as their arguments: a second fit of the
 same scene compiles nothing.
@@ -98,8 +99,12 @@ ERROR_RTOL = 1e-2
 SCHUR_RTOL = 1e-7
 # The loosest Gauss-Newton step (CG's relative residual): the forcing terms start here
 FORCING_MAX = 0.5
-# Texels apart that share a probe of diag(J^T J): 3 x 3 = 9 products per Gauss-Newton step
+# Texels apart that share a probe of diag(J^T J): 3 x 3 = 9 products each time it is probed
 DIAGONAL_SPACING = 3
+# The diagonal is probed again once the unknowns (ln c, ln mfp) moved by this much in all since
+# it was (summed over steps, the largest change of any one): it only scales CG, and probing it
+# every step had been 225 of the 992 products of the 320 x 240 benchmark's fit
+DIAGONAL_DRIFT = 0.2
 
 
 class AlbedoMapError(RenderFitError):
@@ -379,19 +384,25 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
                    profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps, robust)
     u = model.start_map(ell, min_pixels)
     for round_ in range(replans + 1):
+        # A round before the last ends on a loose step (its mean free path only refreshes the
+        # frame); the last, or one whose mean free path stayed, is finished at cg_rtol
+        final = round_ == replans
         say(f"round {round_ + 1}: Gauss-Newton on {int(model.free.sum())} texels x 3 channels")
-        u, ell, n, cg, converged = model.solve(u, ell, max_steps)
+        u, ell, n, cg, converged = model.solve(u, ell, max_steps, finish=final)
         steps, cg_total = steps + n, cg_total + cg
         if estimate:
             expected = model.images(u, ell)
             sigmas = tuple(estimate_noise(p - e, e, m) for p, e, m in zip(photos, expected, uses))
             model = model.with_sigma(sigmas)
             say("noise estimated from the first fit's residuals: solving again with it")
-            u, ell, n, cg, converged = model.solve(u, ell, max_steps)
+            u, ell, n, cg, converged = model.solve(u, ell, max_steps, finish=final)
             steps, cg_total, estimate = steps + n, cg_total + cg, False
             history.append("noise estimated from the photo (adjacent residuals)")
         moved = float(np.max(np.abs(np.asarray(ell) - model.ell)))
-        if round_ == replans or moved <= MFP_REFRESH:
+        if final or moved <= MFP_REFRESH:
+            if not final:
+                u, ell, n, cg, converged = model.solve(u, ell, max_steps, finish=True, tight=True)
+                steps, cg_total = steps + n, cg_total + cg
             break
         # The frame's medium-dependent parts (profile radii, incidence law) were the round's start's:
         # refreshed for the estimate, and re-planned (recompiled) only where the Gaussians moved
@@ -769,14 +780,20 @@ class _Model:
         self.seen = self.cover >= min_pixels
         self.free = self.cover > 1e-6 * max(float(self.cover.max()), 1e-300)
 
-    def solve(self, u, ell, max_steps):
+    def solve(self, u, ell, max_steps, finish=True, tight=False):
+        """Gauss-Newton from (u, ell): converged when a step gains less than 0.01 in chi^2 (or moves
+        nothing), a step solved to cg_rtol where ``finish`` (else any: a round before the last);
+        ``tight``: from the first step at cg_rtol (a round's loose end being finished)."""
         x = {"u": u, "ell": ell}
         cost = float(np.sum(self.residuals(u, ell) ** 2))
         cg_total, converged, n = 0, False, 0
-        forcing = (0.0, 1.0)  # the first step at FORCING_MAX
+        forcing = (0.0, -1.0) if tight else (0.0, 1.0)  # at cg_rtol, or the first step at FORCING_MAX
+        diagonal, drift = None, 0.0
         for n in range(1, max_steps + 1):
+            if diagonal is None or drift > DIAGONAL_DRIFT:
+                diagonal, drift = self._diagonal_of(x, self.views), 0.0
             delta, cg, _, size, eta = self._solve(x, self.views, jax.tree.map(jnp.zeros_like, x), True, 1.0,
-                                                  self._diagonal_of(x, self.views), forcing=forcing)
+                                                  diagonal, forcing=forcing)
             cg_total += int(cg)
             forcing = (float(size), float(eta))
             t = 1.0
@@ -787,15 +804,16 @@ class _Model:
                     break
                 t *= 0.5
             else:
-                if float(eta) > self.cg_rtol * (1 + 1e-9):  # a loose step: solve it again at the floor
+                if finish and float(eta) > self.cg_rtol * (1 + 1e-9):  # a loose step: solve it again at the floor
                     forcing = (0.0, -1.0)
                     continue
                 converged = True  # no decrease along the Gauss-Newton direction: at the minimum to rounding
                 break
             x, gained, cost = trial, cost - new, new
             moved = max(float(jnp.max(jnp.abs(t * delta["u"]))), float(jnp.max(jnp.abs(t * delta["ell"]))))
+            drift += moved
             if moved < 1e-6 or gained < 1e-2:
-                if float(eta) <= self.cg_rtol * (1 + 1e-9):
+                if not finish or float(eta) <= self.cg_rtol * (1 + 1e-9):
                     converged = True
                     break
                 forcing = (0.0, -1.0)  # a loose step gained little: the next at the floor, cg_rtol
