@@ -1,6 +1,6 @@
 """What a per-texel albedo-map fit costs: the first and a second ``fit_albedo_map`` in one process.
 
-    PYTHONPATH=. python benchmarks/albedo_map_speed.py [--cases 64x48:64:16 128x96:128:32]
+    PYTHONPATH=. python benchmarks/albedo_map_speed.py [--cases 64x48:64:16 128x96:128:32 320x240:128:32]
         [--markdown docs/benchmarks/albedo_map_speed.md]
 
 The scene is the tests' plane (``tests/fitting/test_albedo_map.py``: a checker colour map,
@@ -11,8 +11,9 @@ times the solver, and the map's error is a consistency check against the known c
 path-traced truth is ``benchmarks/albedo_map_truth.py``). The mean free path starts at the truth.
 
 One fresh process per case. Timed: the first call (tracing and XLA compiles included) and a
-second call with the same inputs, which since 12-07 compiles nothing (the fit's programs are
-kept per structure, ``fitting.albedo_map._programs``). The baseline, measured in the same
+second call with the same inputs, which since 12-07 compiles none of the fit's programs (they
+are kept per structure, ``fitting.albedo_map._programs``; what it still compiles are a few
+small eager operations). The baseline, measured in the same
 process right after: the median of 5 warm ``render(scene, plan)`` calls of the same frame, so
 that the last column, the second fit in frames' worth, does not depend on the machine's load.
 """
@@ -32,7 +33,7 @@ import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-CASES = ("64x48:64:16", "128x96:128:32")
+CASES = ("64x48:64:16", "128x96:128:32", "320x240:128:32")
 
 
 def _measure(case: str) -> dict:
@@ -126,9 +127,10 @@ def main(argv=None) -> int:
               "so the map's error is a consistency check against the known checker, not truth (that is "
               "[albedo_map_truth.md](albedo_map_truth.md), against Mitsuba 3). Default fit options (errors by "
               "probing), the mean free path started at the truth; the scene's `texture_size` caps the plan's "
-              "texture. The second call has the same inputs: it compiles nothing, because the fit's programs are "
-              "kept per structure (map size, the plan's layout, dtypes). Baseline, measured in the same process: "
-              "the median of 5 warm `render(scene, plan)` frames; the last column is the fit in frames' worth."), ""]
+              "texture. The second call has the same inputs: it compiles none of the fit's programs (they are kept "
+              "per structure: map size, the plan's layout, dtypes), only a few small eager operations. Baseline, "
+              "measured in the same process: the median of 5 warm `render(scene, plan)` frames; the last column is "
+              "the fit in frames' worth."), ""]
     lines += _table(results) + [""]
     for r in results:
         if r["case"].startswith("320x240"):

@@ -213,7 +213,7 @@ def _medium(ell, albedo, eta):
 
 
 class _View(eqx.Module):
-    """The fixed parts of one photo's frame (arrays traced; geometry in the closure)."""
+    """The fixed parts of one photo's frame (arrays traced; the geometry's arrays are in :class:`_Data`)."""
 
     params: object  # RenderParams in dtype, maps.albedo to be replaced
     blur_params: object  # RenderParams in blur_dtype (variances, stretch) for the diffusion
@@ -296,8 +296,10 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
     min_pixels : float
         A texel is fitted when the fitted pixels' bilinear lookup weights on it sum to at least this.
     max_steps, cg_rtol, cg_max_steps
-        Gauss-Newton steps per round; CG's relative tolerance for the last steps (the floor of the
-        forcing terms, module docstring) and its iterations per solve.
+        Gauss-Newton steps per round (a step solved again at ``cg_rtol`` after a loose one found no
+        decrease counts; the last allowed step is solved at ``cg_rtol``); CG's relative tolerance
+        for the last steps (the floor of the forcing terms, module docstring) and its iterations
+        per solve.
     errors : {"probe", "exact", "none"}
         How the error map is computed (module docstring); ``probe_spacing`` and ``seed`` set the probing.
     unconstrained : float
@@ -388,7 +390,7 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
         # frame); the last, or one whose mean free path stayed, is finished at cg_rtol
         final = round_ == replans
         say(f"round {round_ + 1}: Gauss-Newton on {int(model.free.sum())} texels x 3 channels")
-        u, ell, n, cg, converged = model.solve(u, ell, max_steps, finish=final)
+        u, ell, n, cg, converged = model.solve(u, ell, max_steps, finish=final and not estimate)
         steps, cg_total = steps + n, cg_total + cg
         if estimate:
             expected = model.images(u, ell)
@@ -511,7 +513,8 @@ class _Data(eqx.Module):
 @functools.lru_cache(maxsize=8)
 def _programs(structure: _Structure) -> _Programs:
     """The compiled residuals, images, diagonal and solves of ``structure``: a second fit of the same
-    scene layout (another photo, light direction or start) compiles nothing (22 s of 66 s, measured)."""
+    scene layout (another photo, light direction or start) compiles none of them (they had been
+    recompiled per fit: 23.5 s of a 114 s fit of the tests' plane, 2026-12-07)."""
     return _Programs(structure)
 
 
@@ -523,7 +526,7 @@ class _Programs:
 
     def __init__(self, structure: _Structure):
         self.structure = structure
-        self.dtype, self.blur_dtype = jnp.dtype(structure.dtype), jnp.dtype(structure.blur_dtype)
+        self.dtype = jnp.dtype(structure.dtype)
         self.residuals = eqx.filter_jit(self.raw_residuals)
         self.images = eqx.filter_jit(self._images)
         self.diagonal = eqx.filter_jit(self._diagonal)
@@ -645,8 +648,10 @@ class _Model:
 
     def __init__(self, pairs, photos, uses, sigmas, gains, shape, ell, albedo_prime, eta, accuracy, specular,
                  profile_model, g, dtype, blur_dtype, cg_rtol, cg_max_steps, robust):
-        self.dtype, self.shape, self.uses, self.robust = dtype, shape, uses, robust
-        self.cg_rtol, self.cg_max_steps = cg_rtol, cg_max_steps
+        self.dtype, self.shape, self.uses = dtype, shape, uses
+        self.cg_rtol = cg_rtol
+        # The floor as the programs see it (cg_rtol in the fit's dtype: 1e-3 is 1.00000005e-3 in float32)
+        self.cg_floor = float(jnp.asarray(cg_rtol, dtype)) * (1 + 1e-6)
         self.albedo_prime, self.eta = albedo_prime, eta
         self.blur_dtype = dtype if blur_dtype is None else blur_dtype
         self.photos, self.gains, self.sigmas = photos, gains, sigmas
@@ -681,7 +686,7 @@ class _Model:
             layout, held = split(prepared)
             layouts.append((method, layout))
             arrays.append(held)
-        self.arrays = tuple(arrays)
+        self.arrays = jax.tree.map(jnp.asarray, tuple(arrays))  # on the device once, not per call
         self.programs = _programs(_Structure(tuple(layouts), tuple(shape), bool(robust), jnp.dtype(dtype).name,
                                              jnp.dtype(self.blur_dtype).name, profile_model, _hashable(g),
                                              int(cg_max_steps)))
@@ -792,6 +797,8 @@ class _Model:
         for n in range(1, max_steps + 1):
             if diagonal is None or drift > DIAGONAL_DRIFT:
                 diagonal, drift = self._diagonal_of(x, self.views), 0.0
+            if finish and n == max_steps:
+                forcing = (0.0, -1.0)  # the last step allowed: at cg_rtol
             delta, cg, _, size, eta = self._solve(x, self.views, jax.tree.map(jnp.zeros_like, x), True, 1.0,
                                                   diagonal, forcing=forcing)
             cg_total += int(cg)
@@ -804,7 +811,7 @@ class _Model:
                     break
                 t *= 0.5
             else:
-                if finish and float(eta) > self.cg_rtol * (1 + 1e-9):  # a loose step: solve it again at the floor
+                if finish and float(eta) > self.cg_floor:  # a loose step: solve it again at the floor
                     forcing = (0.0, -1.0)
                     continue
                 converged = True  # no decrease along the Gauss-Newton direction: at the minimum to rounding
@@ -813,7 +820,7 @@ class _Model:
             moved = max(float(jnp.max(jnp.abs(t * delta["u"]))), float(jnp.max(jnp.abs(t * delta["ell"]))))
             drift += moved
             if moved < 1e-6 or gained < 1e-2:
-                if not finish or float(eta) <= self.cg_rtol * (1 + 1e-9):
+                if not finish or float(eta) <= self.cg_floor:
                     converged = True
                     break
                 forcing = (0.0, -1.0)  # a loose step gained little: the next at the floor, cg_rtol

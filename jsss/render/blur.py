@@ -245,8 +245,6 @@ def _blur_pass_jvp(axis, taps, wrap, primals, tangents):
         instantiated = tuple(jnp.zeros(t.shape, t.dtype) if type(t) is SymbolicZero else t for t in tangents)
         return jax.jvp(lambda *a: _normalised_pass(*a, axis, taps, wrap)[0], primals, instantiated)
     out, weight = _normalised_pass(texture, mask, spacing, axis, taps, wrap)
-    if type(d_texture) is SymbolicZero:
-        return out, jnp.zeros_like(out)
     has = weight > 1e-12
     numerator = _taps(d_texture * mask[..., None], spacing, axis, taps, wrap)
     return out, jnp.where(has, numerator / jnp.where(has, weight, 1.0), 0.0) * mask[..., None]

@@ -210,3 +210,21 @@ def test_derivatives_in_the_texture_are_the_blur_itself(wrap_u, uniform):
         h = 1e-6
         fd = (step(tex + h * v, smooth + h * dm) - step(tex - h * v, smooth - h * dm)) / (2 * h)
         assert np.abs(np.asarray(both) - np.asarray(fd)).max() < 1e-7 * max(1.0, float(jnp.abs(fd).max()))
+
+
+def test_the_derivative_in_the_variance_matches_finite_differences():
+    """Where the spacing has a tangent (a variance differentiated), the pass is differentiated
+    itself, not by the texture-only rule: against central differences, at variances whose
+    spacings lie between the table's breakpoints (there the blur is smooth in the variance)."""
+    rng = np.random.default_rng(13)
+    tex = jnp.asarray(rng.uniform(size=(32, 29, 3)))
+    mask = jnp.asarray((rng.uniform(size=(32, 29)) > 0.2).astype(float))
+    for stretch in (jnp.asarray([0.5, 0.25]), jnp.asarray(0.25 + 0.2 * rng.uniform(size=(32, 29, 2)))):
+        for variance in (0.7, 9.3):
+            def step(v, stretch=stretch):
+                return blur_step(tex, mask, stretch, v)
+
+            _, d = jax.jvp(step, (variance,), (1.0,))
+            h = 1e-6 * variance
+            fd = (step(variance + h) - step(variance - h)) / (2 * h)
+            assert np.abs(np.asarray(d) - np.asarray(fd)).max() < 1e-6 * max(1.0, float(jnp.abs(fd).max()))
