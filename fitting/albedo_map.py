@@ -41,7 +41,7 @@ only refreshes the frame) ends on a loose step (on the tests' plane: CG 2890 -> 
 the result within its errors). The programs (residuals, images, diagonal, solves) are compiled once per
 *structure* -- map size, the plan's layout of the geometry (:mod:`jsss.render.programs`), dtypes
 -- and kept across fits, with the geometry's arrays as their arguments: a second fit of the
-same scene compiles nothing.
+same scene compiles none of them.
 
 Uncertainty: the covariance is :math:`s^2 (J^T J)^{-1}` with :math:`s^2 = \max(1, \chi^2/\nu)`
 (:mod:`fitting.statistics`). Its diagonal is estimated by *probing* (``errors="probe"``): the map
