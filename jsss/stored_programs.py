@@ -26,7 +26,7 @@ import threading
 import warnings
 from pathlib import Path
 
-__all__ = ["folder", "keep_programs_in", "reusable_program", "stored_program"]
+__all__ = ["folder", "forget_loaded_programs", "keep_programs_in", "reusable_program", "stored_program"]
 
 # The folder given to keep_programs_in; None (library default) traces as usual.
 _folder: Path | None = None
@@ -41,6 +41,13 @@ def keep_programs_in(where) -> None:
     """
     global _folder
     _folder = None if where is None else Path(where)
+
+
+def forget_loaded_programs() -> None:
+    """Let go of the programs this process loaded or compiled through this module (the next
+    call loads them from their files again): each XLA executable holds memory maps of its own,
+    of which a Linux process may have 65530 (the test suite's long-lived workers call this)."""
+    _loaded.clear()
 
 
 def folder() -> Path | None:

@@ -86,3 +86,48 @@ def test_programs_compiled_from_a_filled_compilation_cache_are_stored_whole(tmp_
     assert _run(store, "on", xla) == (3, plain)  # XLA's cache serves these compiles; the store is filled
     assert len(list((store / "jsss-programs").iterdir())) == 3
     assert _run(store, "on", xla) == (1, plain)  # loaded and run: only the call under jit traces
+
+
+FORGET = """
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+
+jax.config.update("jax_enable_x64", True)
+from jsss import stored_programs
+
+traces = []
+
+
+def double(x):
+    traces.append(1)
+    return 2 * x
+
+
+program = stored_programs.stored_program(jax.jit(double), name="double", identity="double")
+stored_programs.keep_programs_in(sys.argv[1])
+x = jnp.arange(3.0)
+first = program(x)
+stored_programs.forget_loaded_programs()
+jax.clear_caches()  # JAX's own trace of double too: a call that reaches it traces again
+again = program(x)  # from the file, not traced
+for path in (Path(sys.argv[1]) / "jsss-programs").iterdir():
+    path.unlink()
+kept = program(x)  # nothing forgotten since: from memory, not traced
+stored_programs.forget_loaded_programs()
+jax.clear_caches()
+last = program(x)  # neither in memory nor on disk: traced
+print(len(traces), *(bool(jnp.array_equal(first, y)) for y in (again, kept, last)))
+"""
+
+
+def test_forgotten_programs_are_loaded_again_from_their_files(tmp_path):
+    """The test suite's workers let go of loaded programs (each executable holds memory maps of
+    its own); the next call loads the file again without tracing, and traces only where the file
+    is gone too."""
+    out = subprocess.run([sys.executable, "-c", FORGET, str(tmp_path)], capture_output=True, text=True, check=False,
+                         env={"PATH": "", "HOME": str(tmp_path)}, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["2", "True", "True", "True"]
