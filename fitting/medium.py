@@ -240,9 +240,9 @@ def _fit_channels(measured, stderr, totals, total_errs, scale_errs, eta, fixed, 
             # estimates were within 1.8 %.
             residuals = _residuals(params, args)
             covariance = jnp.eye(residuals.size, dtype=residuals.dtype) + table_residuals @ table_residuals.T
-            # Conjugate gradients (plain XLA), not jnp.linalg.solve's LAPACK call: this fit is a
-            # stored program (jsss.stored_programs), and two of three fresh-clone CI runs whose fit
-            # held the LAPACK solve had a worker segfault in XLA's compiler later in that process.
+            # Conjugate gradients (plain XLA), not jnp.linalg.solve's LAPACK call: chosen on 12-06,
+            # when CI workers segfaulted in XLA after this fit held the LAPACK solve (the cause,
+            # found on 12-07, was the workers' memory maps running out: tests/conftest.py).
             operator = lx.MatrixLinearOperator(covariance, lx.positive_semidefinite_tag)
             whitened = lx.linear_solve(operator, residuals, lx.CG(rtol=1e-12, atol=1e-12, max_steps=4 * residuals.size),
                                        throw=False).value

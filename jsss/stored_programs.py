@@ -46,7 +46,8 @@ def keep_programs_in(where) -> None:
 def forget_loaded_programs() -> None:
     """Let go of the programs this process loaded or compiled through this module (the next
     call loads them from their files again): each XLA executable holds memory maps of its own,
-    of which a Linux process may have 65530 (the test suite's long-lived workers call this)."""
+    of which a Linux process may have 65530
+    (for long-lived processes: a batch of many image sizes, the test suite's workers)."""
     _loaded.clear()
 
 

@@ -60,35 +60,12 @@ def pytest_runtest_teardown(item, nextitem):
         _release_compiled_programs()
 
 
-# Linux gives a process at most vm.max_map_count (65530 by default) memory maps, and every XLA
-# CPU executable a process keeps holds about 6-13 of them (its code and data sections). An xdist
-# worker keeps every program the suite compiled in it: on 12-07 one reached 24000 maps (5.1 GB)
-# 6 minutes into a 25-minute run, and workers had segfaulted inside XLA late in four CI runs
-# (12-05 to 12-07: h_function's programs, a fit's), each time in a test that passed alone.
-MAP_BUDGET = 30000
-
-
-def _memory_maps() -> int | None:
-    """This process's number of memory maps, or None where /proc does not say."""
-    try:
-        with open("/proc/self/maps", "rb") as maps:
-            return sum(1 for _ in maps)
-    except OSError:
-        return None
-
-
 def _release_compiled_programs() -> None:
-    """Past :data:`MAP_BUDGET` maps, drop JAX's compiled programs and the stored programs this
-    process loaded; the next test compiles (or loads from the run's compilation cache) what it
-    needs again."""
-    import gc
-    import sys
+    """A worker keeps every program the suite compiled in it, each holding memory maps, of which
+    Linux gives a process 65530: past 30000 they are let go (the next test compiles, or loads
+    from the run's compilation cache, what it needs again). Workers had segfaulted inside XLA
+    late in four CI runs (12-05 to 12-07), each time in a test that passed alone; one measured
+    at 63100 maps and 7.1 GB in the test that had crashed twice."""
+    from measure.commands._console import release_compiled_programs
 
-    maps = _memory_maps()
-    if maps is None or maps < MAP_BUDGET:
-        return
-    jax.clear_caches()
-    store = sys.modules.get("jsss.stored_programs")
-    if store is not None:
-        store.forget_loaded_programs()
-    gc.collect()
+    release_compiled_programs()

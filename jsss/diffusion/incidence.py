@@ -53,8 +53,9 @@ __all__ = ["deposit_depth", "h_function", "h_function_numpy", "incidence_law", "
 NODES = 48          # Gauss-Legendre nodes on [0, 1]
 ITERATIONS = 400    # the 1/H form converges geometrically; at albedo 1 it is slowest: above albedo 0.9999
                     # it has not converged (H(1) 2.15 at albedo 1 - 1e-6 for 2.903). Newton steps fixed
-                    # that, but their program segfaulted when CI workers loaded it from the compilation
-                    # cache (2026-12-05), so they are out until that is understood.
+                    # that; they were taken out (2026-12-05) after CI workers segfaulted in their program,
+                    # which on 12-07 turned out to be the workers running out of memory maps
+                    # (tests/conftest.py), not the program: they can come back.
 
 
 def _nodes(dtype):

@@ -27,8 +27,9 @@ import time
 import warnings
 from pathlib import Path
 
-__all__ = ["Progress", "UsageError", "add_commands", "cache_dir", "compilation_cache_dir", "enable_caches", "error_line",
-           "exit_status", "fit_grid", "float64", "start", "version", "write_atomically", "write_png", "write_text"]
+__all__ = ["MAP_BUDGET", "Progress", "UsageError", "add_commands", "cache_dir", "compilation_cache_dir", "enable_caches",
+           "error_line", "exit_status", "fit_grid", "float64", "memory_maps", "release_compiled_programs", "start",
+           "version", "write_atomically", "write_png", "write_text"]
 
 
 class UsageError(ValueError):
@@ -136,6 +137,43 @@ def start(*, spectra: bool = False) -> None:
 def _start_once() -> None:
     float64()
     enable_caches()
+
+
+# Linux gives a process at most vm.max_map_count (65530 by default) memory maps, and each XLA
+# CPU executable a process keeps holds about 6-13 of them (its code and data sections); JAX keeps
+# every program it compiled. A process past the limit segfaults inside XLA: the test suite's
+# long-lived workers did, four times (12-05 to 12-07; one measured at 63100 maps, 7.1 GB).
+MAP_BUDGET = 30000
+
+
+def memory_maps() -> int | None:
+    """This process's number of memory maps (Linux), or None where ``/proc`` does not say."""
+    try:
+        with open("/proc/self/maps", "rb") as maps:
+            return sum(1 for _ in maps)
+    except OSError:
+        return None
+
+
+def release_compiled_programs(budget: int | None = None) -> bool:
+    """In a process that holds more than ``budget`` (default :data:`MAP_BUDGET`) memory maps,
+    let go of every compiled program: JAX's (``jax.clear_caches()``) and those loaded through
+    :mod:`jsss.stored_programs`. The next call of each compiles it again, or loads it from the
+    compilation cache. For long-lived processes that compile many shapes (a batch's images, the
+    test suite's workers); returns whether it let go."""
+    import gc
+
+    import jax
+
+    from jsss.stored_programs import forget_loaded_programs
+
+    maps = memory_maps()
+    if maps is None or maps <= (MAP_BUDGET if budget is None else budget):
+        return False
+    jax.clear_caches()
+    forget_loaded_programs()
+    gc.collect()
+    return True
 
 
 @functools.lru_cache(maxsize=None)

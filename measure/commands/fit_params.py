@@ -24,15 +24,27 @@ import glob
 import json
 import logging
 import math
-import re
 import os
+import re
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from ._console import Parser, Progress, UsageError, add_commands, exit_status, fit_grid, json_safe, start, version, \
-    write_atomically, write_text
+from ._console import (
+    Parser,
+    Progress,
+    UsageError,
+    add_commands,
+    exit_status,
+    fit_grid,
+    json_safe,
+    release_compiled_programs,
+    start,
+    version,
+    write_atomically,
+    write_text,
+)
 
 __all__ = ["main", "parser"]
 
@@ -606,6 +618,8 @@ def _fit_row(job, options) -> dict:
         row["warnings"] = "; ".join(result.warnings)
     except Exception as error:  # recorded in the table, never dropped
         row.update(status="failed", error=f"{type(error).__name__}: {error}")
+    # Images of many sizes compile many programs, each holding memory maps the process may run out of
+    release_compiled_programs()
     return row
 
 

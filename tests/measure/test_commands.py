@@ -493,3 +493,31 @@ def test_shipped_examples_render_from_any_folder_by_name(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "measure.commands.render", "example:nope"], capture_output=True,
                          text=True, stdin=subprocess.DEVNULL, timeout=120, cwd=tmp_path)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "example:marble_sphere" in bad.stderr
+
+
+def test_a_process_past_its_memory_map_budget_lets_its_compiled_programs_go():
+    """Each XLA executable a process keeps holds memory maps, of which Linux gives a process
+    65530 (past them XLA segfaults): under the budget nothing is let go; past it JAX's compiled
+    programs are (the next call compiles again), and a batch row checks after every image."""
+    import jax
+    import jax.numpy as jnp
+
+    if _console.memory_maps() is None:
+        pytest.skip("no /proc/self/maps here")
+    assert _console.memory_maps() > 0
+    double = jax.jit(lambda x: 2 * x)
+    double(jnp.ones(3))
+    assert double._cache_size() == 1
+    assert not _console.release_compiled_programs(budget=10**9) and double._cache_size() == 1
+    assert _console.release_compiled_programs(budget=0) and double._cache_size() == 0
+
+
+def test_every_batch_row_ends_by_checking_the_memory_map_budget(monkeypatch, tmp_path):
+    """A batch's images of many sizes compile many programs: each row, fitted or failed, ends by
+    releasing them past the budget (in this process or on a Dask worker, both run _fit_row)."""
+    calls = []
+    monkeypatch.setattr(fit_params, "release_compiled_programs", lambda: calls.append(1))
+    options = {"pixel_mm": None, "eta": 1.3, "reference_reflectance": 0.99, "model": "transport", "g": 0.0,
+               "view_angle_deg": 0.0, "white_balance": "none"}
+    row = fit_params._fit_row((tmp_path / "missing.exr", tmp_path / "missing_ref.exr", None, {}), options)
+    assert row["status"] == "failed" and "missing" in row["error"] and calls == [1]
