@@ -51,11 +51,11 @@ __all__ = ["deposit_depth", "h_function", "h_function_numpy", "incidence_law", "
            "point_light_loss"]
 
 NODES = 48          # Gauss-Legendre nodes on [0, 1]
-ITERATIONS = 400    # the 1/H form converges geometrically; at albedo 1 it is slowest: above albedo 0.9999
-                    # it has not converged (H(1) 2.15 at albedo 1 - 1e-6 for 2.903). Newton steps fixed
-                    # that; they were taken out (2026-12-05) after CI workers segfaulted in their program,
-                    # which on 12-07 turned out to be the workers running out of memory maps
-                    # (tests/conftest.py), not the program: they can come back.
+ITERATIONS = 30     # steps of the 1/H form first: it converges geometrically, slowly near albedo 1
+NEWTON_STEPS = 8    # then Newton on the nodes' equations: to 1e-15 at every albedo up to 1 - 1e-12 (the
+                    # 1/H form alone, 400 steps, had H(1) = 2.15 at albedo 1 - 1e-6 for 2.903). They were
+                    # out from 12-05 to 12-07, blamed for CI workers' segfaults that were the workers'
+                    # memory maps running out (measure.commands._console.release_compiled_programs)
 
 
 def _nodes(dtype):
@@ -79,11 +79,11 @@ def h_function(albedo, mu):
     r"""Chandrasekhar's H function for isotropic scattering, :math:`H(\mu)` at ``mu`` in [0, 1].
 
     ``albedo`` (shape ``C``) in [0, 1]; ``mu`` (shape ``S``) broadcast against it: the result
-    has shape ``S + C``. Solved on Gauss-Legendre nodes by iterating the :math:`1/H` form (a
-    fixed number of steps, so ``jax.grad`` goes through it), then extended to ``mu`` by the
-    same equation (Nystrom). Accurate to 1e-7 against its own moment identity
-    :math:`\int_0^1 H\,d\mu = (2/\omega)(1 - \sqrt{1-\omega})` for albedos up to 0.999;
-    not converged above 0.9999 (``ITERATIONS``);
+    has shape ``S + C``. Solved on Gauss-Legendre nodes by iterating the :math:`1/H` form, then
+    by Newton steps on the nodes' equations (a fixed number of each, so ``jax.grad`` goes
+    through them), then extended to ``mu`` by the same equation (Nystrom). The moment identity
+    :math:`\int_0^1 H\,d\mu = (2/\omega)(1 - \sqrt{1-\omega})` holds to 1e-7 at every albedo
+    and :math:`H(1)` = 2.90781 at albedo 1 (Chandrasekhar's table);
     an albedo of 1 is taken as :math:`1 - 10^{-12}`, in float32 :math:`1 - 9.5\cdot 10^{-7}`
     (the iteration has no fixed scale there: :func:`largest_albedo`).
     """
@@ -98,7 +98,13 @@ def h_function(albedo, mu):
     def step(_, H):
         return 1.0 / (root + half * (H[..., None, :] * kernel).sum(-1))
 
+    def newton(_, H):
+        g = root + half * (H[..., None, :] * kernel).sum(-1)                    # 1/H's right side
+        jacobian = jnp.eye(NODES, dtype=dtype) * g[..., None] + half[..., None] * H[..., :, None] * kernel
+        return H - jnp.linalg.solve(jacobian, (H * g - 1)[..., None])[..., 0]
+
     H = jax.lax.fori_loop(0, ITERATIONS, step, jnp.ones(albedo.shape + (NODES,), dtype))
+    H = jax.lax.fori_loop(0, NEWTON_STEPS, newton, H)
     # At mu: 1/H(mu) = root + albedo/2 sum_j w_j mu_j H_j / (mu + mu_j); mu = 0 gives H = 1.
     flat = mu.reshape(-1)
     terms = (weights * nodes) / (flat[:, None] + nodes[None, :])             # (S, nodes)
@@ -122,6 +128,10 @@ def h_function_numpy(albedo, mu) -> np.ndarray:
     H = np.ones(capped.shape + (NODES,), dtype)
     for _ in range(ITERATIONS):
         H = 1.0 / (root + half * (H[..., None, :] * kernel).sum(-1))
+    for _ in range(NEWTON_STEPS):
+        g = root + half * (H[..., None, :] * kernel).sum(-1)
+        jacobian = np.eye(NODES, dtype=dtype) * g[..., None] + half[..., None] * H[..., :, None] * kernel
+        H = H - np.linalg.solve(jacobian, (H * g - 1)[..., None])[..., 0]
     terms = (weights * nodes) / (mu.reshape(-1)[:, None] + nodes[None, :])
     inverse = root[None, ..., 0] + half[None, ..., 0] * np.einsum("sj,...j->s...", terms, H)
     return (1.0 / inverse).reshape(mu.shape + capped.shape)
