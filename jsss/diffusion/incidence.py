@@ -75,21 +75,12 @@ def largest_albedo(albedo, dtype):
     return jnp.minimum(albedo, jnp.asarray(1 - _albedo_margin(dtype), dtype))
 
 
-def h_function(albedo, mu):
-    r"""Chandrasekhar's H function for isotropic scattering, :math:`H(\mu)` at ``mu`` in [0, 1].
-
-    ``albedo`` (shape ``C``) in [0, 1]; ``mu`` (shape ``S``) broadcast against it: the result
-    has shape ``S + C``. Solved on Gauss-Legendre nodes by iterating the :math:`1/H` form, then
-    by Newton steps on the nodes' equations (a fixed number of each, so ``jax.grad`` goes
-    through them), then extended to ``mu`` by the same equation (Nystrom). The moment identity
-    :math:`\int_0^1 H\,d\mu = (2/\omega)(1 - \sqrt{1-\omega})` holds to 1e-7 at every albedo
-    and :math:`H(1)` = 2.90781 at albedo 1 (Chandrasekhar's table);
-    an albedo of 1 is taken as :math:`1 - 10^{-12}`, in float32 :math:`1 - 9.5\cdot 10^{-7}`
-    (the iteration has no fixed scale there: :func:`largest_albedo`).
-    """
-    mu = as_float_array(mu)
-    dtype = jnp.result_type(as_float_array(albedo), mu)
-    albedo = largest_albedo(as_float_array(albedo), dtype)
+@jax.jit
+def _h_on_nodes(albedo):
+    """H on the Gauss-Legendre nodes, C + (NODES,), for held albedos ``albedo`` (C): the 1/H
+    iteration, then Newton. Jitted once here: called eagerly (a frame's exit law solves it
+    twice), the loops were traced again at every call, 340 ms each with the Newton steps."""
+    dtype = albedo.dtype
     nodes, weights = _nodes(dtype)
     root = safe_sqrt(jnp.maximum(1 - albedo, 0.0))[..., None]              # C + (1,)
     half = (albedo / 2)[..., None]
@@ -104,7 +95,28 @@ def h_function(albedo, mu):
         return H - jnp.linalg.solve(jacobian, (H * g - 1)[..., None])[..., 0]
 
     H = jax.lax.fori_loop(0, ITERATIONS, step, jnp.ones(albedo.shape + (NODES,), dtype))
-    H = jax.lax.fori_loop(0, NEWTON_STEPS, newton, H)
+    return jax.lax.fori_loop(0, NEWTON_STEPS, newton, H)
+
+
+def h_function(albedo, mu):
+    r"""Chandrasekhar's H function for isotropic scattering, :math:`H(\mu)` at ``mu`` in [0, 1].
+
+    ``albedo`` (shape ``C``) in [0, 1]; ``mu`` (shape ``S``) broadcast against it: the result
+    has shape ``S + C``. Solved on Gauss-Legendre nodes by iterating the :math:`1/H` form, then
+    by Newton steps on the nodes' equations (a fixed number of each, so ``jax.grad`` goes
+    through them), then extended to ``mu`` by the same equation (Nystrom). The moment identity
+    :math:`\int_0^1 H\,d\mu = (2/\omega)(1 - \sqrt{1-\omega})` holds to 1e-7 at every albedo
+    and :math:`H(1)` = 2.90781 at albedo 1 (Chandrasekhar's closed integral);
+    an albedo of 1 is taken as :math:`1 - 10^{-12}`, in float32 :math:`1 - 9.5\cdot 10^{-7}`
+    (the iteration has no fixed scale there: :func:`largest_albedo`).
+    """
+    mu = as_float_array(mu)
+    dtype = jnp.result_type(as_float_array(albedo), mu)
+    albedo = largest_albedo(jnp.asarray(as_float_array(albedo), dtype), dtype)
+    nodes, weights = _nodes(dtype)
+    root = safe_sqrt(jnp.maximum(1 - albedo, 0.0))[..., None]              # C + (1,)
+    half = (albedo / 2)[..., None]
+    H = _h_on_nodes(albedo)
     # At mu: 1/H(mu) = root + albedo/2 sum_j w_j mu_j H_j / (mu + mu_j); mu = 0 gives H = 1.
     flat = mu.reshape(-1)
     terms = (weights * nodes) / (flat[:, None] + nodes[None, :])             # (S, nodes)
