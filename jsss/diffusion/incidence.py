@@ -53,7 +53,7 @@ __all__ = ["deposit_depth", "h_function", "h_function_numpy", "incidence_law", "
 NODES = 48          # Gauss-Legendre nodes on [0, 1]
 ITERATIONS = 30     # steps of the 1/H form first: it converges geometrically, slowly near albedo 1
 NEWTON_STEPS = 8    # then Newton on the nodes' equations: to 1e-15 at every albedo up to 1 - 1e-12 (the
-                    # 1/H form alone, 400 steps, had H(1) = 2.15 at albedo 1 - 1e-6 for 2.903). They were
+                    # 1/H form alone, 400 steps, overshot: H(1) = 3.92 at albedo 1 - 1e-6 for 2.903). They were
                     # out from 12-05 to 12-07, blamed for CI workers' segfaults that were the workers'
                     # memory maps running out (measure.commands._console.release_compiled_programs)
 
