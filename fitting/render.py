@@ -287,9 +287,28 @@ def fit_pixels(scene: Scene, photo, *, mask=None, saturation: float | None = Non
     return use
 
 
+# The range a fit's medium may take: sigma_s' [1/mm] and sigma_a / sigma_s' (the transport
+# tables end at 1e3). A photo that does not constrain a channel (ketchup's blue, whose light
+# hardly diffuses back) let Levenberg-Marquardt run to sigma_a / sigma_s' = 1e36 there; the
+# next plan then raised and the render overflowed (a path-traced ketchup photo, 2026-12-07).
+# Beyond the range the model is held at its edge: the residuals stop moving, so that
+# parameter gets no finite error, and the fit says where it ran (its warnings).
+SCATTERING_RANGE = (1e-4, 1e4)
+ABSORPTION_RATIO_RANGE = (1e-9, 999.0)
+
+
+def _held_in_range(theta):
+    """``theta[:6]`` (ln sigma_a, ln sigma_s') clipped to the fit's range (see above)."""
+    ln_scattering = jnp.clip(theta[3:6], *np.log(SCATTERING_RANGE))
+    ln_absorption = jnp.clip(theta[:3], ln_scattering + np.log(ABSORPTION_RATIO_RANGE[0]),
+                             ln_scattering + np.log(ABSORPTION_RATIO_RANGE[1]))
+    return jnp.concatenate([ln_absorption, ln_scattering])
+
+
 def _medium(theta, eta) -> Medium:
-    """The medium of the log-coefficients ``theta[:6]`` (ln sigma_a, ln sigma_s')."""
-    return Medium(jnp.exp(theta[:3]), jnp.exp(theta[3:6]), eta)
+    """The medium of the log-coefficients ``theta[:6]`` (ln sigma_a, ln sigma_s'), held in the fit's range."""
+    held = _held_in_range(theta)
+    return Medium(jnp.exp(held[:3]), jnp.exp(held[3:6]), eta)
 
 
 def _artist(theta, profile_model, g, eta):
@@ -721,7 +740,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         raise RenderFitError(f"block must be a positive integer; got {block!r}.")
     # The held gain, the reference's ln gain and its inverse relative error (_residual_fn)
     exposure = jnp.asarray([held_gain or 1.0, np.log(held_gain or 1.0), 1.0 / gain_err if prior else 0.0], dtype)
-    notes, history, steps = [], [], 0
+    notes, history, steps, changed = [], [], 0, []
     say = progress if progress is not None else (lambda message: None)
     def plan_for(theta, method=method):
         medium = _medium(theta, eta)
@@ -820,7 +839,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         theta, n_steps, solved, jac = _solve(residuals, theta, args, max_steps=max_steps,
                                              rtol=1e-8, atol=1e-10)
         steps += int(n_steps)
-        if round_ == replans:
+        if replans == 0:  # the caller holds the start's plan
             break
         # The plan was made for the start: made again for the estimate, is it the same? The
         # passes it turns on (a translucent shadow map, single scattering) and the variances
@@ -852,6 +871,11 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
                                                       - first_leg_change(fit_scene)[0])) > LAW_REPLAN:
                 changed.append(f"first leg (its change at the rim moved by {100 * moved:.2f} %)")
         if not changed:
+            break
+        if round_ == replans:  # the plan moves still, and no round is left: the estimate is not its own plan's
+            notes.append(f"the plan did not settle: re-planned {replans} times for the estimate, and the last "
+                         f"estimate moves it again ({', '.join(changed)}); the estimate and its errors hold for "
+                         "a plan made for another medium (replans=... for more rounds)")
             break
         history.append(f"re-planned for the estimate after round {round_ + 1}: " + ", ".join(changed))
         say(history[-1])
@@ -886,8 +910,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     if not (np.isfinite(r).all() and np.isfinite(J).all()):
         # A NaN from the renderer would otherwise surface as "eigenvalues did not converge".
         raise RenderFitError(f"{scene.source}: the fit's render or its derivative is not finite at sigma_a = "
-                             f"{np.exp(np.asarray(theta[:3])).tolist()}, "
-                             f"sigma_s' = {np.exp(np.asarray(theta[3:6])).tolist()} ({plan.method}, {profile_model}); "
+                             f"{np.exp(np.asarray(_held_in_range(theta))[:3]).tolist()}, "
+                             f"sigma_s' = {np.exp(np.asarray(_held_in_range(theta))[3:6]).tolist()} "
+                             f"({plan.method}, {profile_model}); "
                              "this is a bug in jsss: please report it with the scene.")
     cov, null = covariance(J, error_scale(chi2))
     theta_np = np.asarray(theta)
@@ -895,7 +920,12 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     A = np.asarray(jax.jacfwd(_artist)(theta[:6], profile_model, g, eta))
     artist = np.asarray(_artist(theta[:6], profile_model, g, eta))
     artist_err = standard_errors(np.pad(A, ((0, 0), (0, len(theta_np) - 6))), cov, null)
-    sigma_a, sigma_s = np.exp(theta_np[:3]), np.exp(theta_np[3:6])
+    held = np.asarray(_held_in_range(theta))
+    outside = np.abs(held - theta_np[:6]) > 1e-9 * np.maximum(1.0, np.abs(theta_np[:6]))
+    rel[:6] = np.where(outside, np.inf, rel[:6])  # held at the edge: the photo did not put it there
+    channel_held = np.tile(outside[:3] | outside[3:6], 2)  # R_d and mean free path of that channel
+    artist_err = np.where(channel_held, np.inf, artist_err)
+    sigma_a, sigma_s = np.exp(held[:3]), np.exp(held[3:6])
     names = ([f"ln sigma_a {c}" for c in "RGB"] + [f"ln sigma_s' {c}" for c in "RGB"] + (["ln gain"] if fit_gain else [])
              + (["ln roughness"] if fit_roughness else []))
     loose = [f"{name[3:]} ({'inf' if not np.isfinite(e) else f'{100 * e:.0f} %'})"
@@ -904,13 +934,18 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         notes.append("not constrained by the image (relative standard error): " + ", ".join(loose)
                      + "; their values are the solver's, not the photo's (a uniformly lit object hides the mean "
                        "free path; Lambert has no spread at all)")
+    if outside.any():
+        notes.append("ran out of the model's range (sigma_s' " + "-".join(f"{v:g}" for v in SCATTERING_RANGE)
+                     + " /mm, sigma_a / sigma_s' up to " + f"{ABSORPTION_RATIO_RANGE[1]:g}) in "
+                     + ", ".join(n[3:] for n, o in zip(names, outside) if o)
+                     + ": held at its edge, not a measurement (the photo does not constrain it)")
     albedo = sigma_s / (sigma_a + sigma_s)
     start_albedo = np.asarray(scattering) / np.asarray(absorption + scattering)
     edge = [c for c, a, a0 in zip("RGB", albedo, start_albedo) if a > 0.9999 and a0 <= 0.9999]
     if edge:
         notes.append("ran to the edge of the parameters: no absorption left in " + "/".join(edge)
                      + (" (with the gain fitted, brightness is gain x R_d and the fit traded one for the other; "
-                        "hold the gain for a calibrated camera: gain=1, --no-gain)" if fit_gain else ""))
+                        "hold the gain for a calibrated camera: gain=1, --no-gain)" if fit_gain and not prior else ""))
     if chi2 > 4:
         notes.append(f"poor fit: chi2/dof {chi2:.1f} (expected about 1); the errors are widened by its square root. "
                      "Likely a wrong eta, geometry or light, a noise level set too low, or the profile model's bias")
@@ -933,7 +968,8 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     return RenderFit(final, sigma_a_err, sigma_s * rel[3:6], gain_value,
                      gain_value * gain_rel, artist[:3], artist_err[:3], artist[3:],
                      artist_err[3:], cov, tuple(names), chi2, steps,
-                     bool(solved) and not edge and not unresolved and bool(np.all(np.isfinite(theta_np)))
+                     bool(solved) and not edge and not unresolved and not (replans and changed)
+                     and bool(np.all(np.isfinite(theta_np)))
                      and bool(np.all(np.isfinite(rel))),
                      int(use.sum()), plan.method, profile_model,
                      image * gain_value, use, tuple(notes), tuple(history), np.asarray(sigma), unresolved,

@@ -188,3 +188,39 @@ def test_rim_mm_leaves_out_the_pixels_near_an_open_surfaces_rim():
 def test_a_sphere_has_no_rim(scene):
     photo = np.ones((48, 64, 3))
     assert np.array_equal(fit_pixels(scene, photo, rim_mm=50.0), fit_pixels(scene, photo))
+
+
+def test_the_fits_medium_is_held_in_its_range_and_flat_beyond_it():
+    """A photo that does not constrain a channel let Levenberg-Marquardt run sigma_a / sigma_s'
+    to 1e36 (a path-traced ketchup photo's blue, 2026-12-07): the next plan raised "transport
+    tables cover ... <= 1e3" and the render overflowed. The fit's medium is held in
+    SCATTERING_RANGE and ABSORPTION_RATIO_RANGE: inside, the coefficients are exp(theta) with
+    unit slope; beyond, the edge, finite, with zero slope (so the residuals stop moving and that
+    parameter gets an infinite error), and the transport profile's R_d stays finite there."""
+    import jax
+
+    from fitting.render import (
+        ABSORPTION_RATIO_RANGE,
+        SCATTERING_RANGE,
+        _artist,
+        _medium,
+    )
+
+    eta = jnp.full(3, 1.3)
+    inside = jnp.log(jnp.asarray([0.01, 0.1, 1.0, 1.0, 2.0, 3.0]))
+    medium = _medium(inside, eta)
+    np.testing.assert_allclose(np.concatenate([medium.sigma_a, medium.sigma_s_prime]), np.exp(inside), rtol=1e-12)
+    slope = jax.jacfwd(lambda t: jnp.log(jnp.concatenate([_medium(t, eta).sigma_a, _medium(t, eta).sigma_s_prime])))
+    np.testing.assert_allclose(slope(inside), np.eye(6), atol=1e-12)
+
+    # blue ran to sigma_a / sigma_s' = 1e36, green's sigma_s' to 1e-209 /mm
+    beyond = inside.at[2].set(inside[5] + np.log(1e36)).at[4].set(-480.0)
+    held = _medium(beyond, eta)
+    a, s = np.asarray(held.sigma_a), np.asarray(held.sigma_s_prime)
+    np.testing.assert_allclose(a[2] / s[2], ABSORPTION_RATIO_RANGE[1], rtol=1e-12)
+    np.testing.assert_allclose(s[1], SCATTERING_RANGE[0], rtol=1e-12)
+    J = np.asarray(slope(beyond))
+    assert np.all(J[:, 2] == 0) and np.all(J[:, 4] == 0)  # flat beyond the edge
+    assert J[0, 0] == pytest.approx(1.0) and J[5, 5] == pytest.approx(1.0)  # the others still move
+    artist = np.asarray(_artist(beyond, "transport", 0.0, eta))
+    assert np.all(np.isfinite(artist)) and np.all(np.isfinite(np.asarray(jax.jacfwd(_artist)(beyond, "transport", 0.0, eta))))
