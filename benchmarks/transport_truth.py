@@ -136,7 +136,9 @@ def _wall_curtains(mi, scene):
     return walls
 
 
-def _mitsuba_scene(mi, scene, ply, bsdf, interior=None):
+def _mitsuba_scene(mi, scene, ply, bsdf, interior=None, extra=None):
+    """Mitsuba's scene of ``scene``'s object (``bsdf``, ``interior`` medium), camera and lights;
+    ``extra``: more shapes by name (a grey card in the frame)."""
     cam = scene.camera
     lights = {}
     for i, light in enumerate(scene.lights):
@@ -159,7 +161,7 @@ def _mitsuba_scene(mi, scene, ply, bsdf, interior=None):
                    "film": {"type": "hdrfilm", "width": cam.width, "height": cam.height,
                             "rfilter": {"type": "box"}, "pixel_format": "rgb"},
                    "sampler": {"type": "independent"}},
-        "object": shape, **lights,
+        "object": shape, **lights, **(extra or {}),
         **(_wall_curtains(mi, scene) if BLACK_WALLS and np.ptp(scene.mesh.vertices[:, 2]) < 1e-9 else {})})
 
 
