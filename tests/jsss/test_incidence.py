@@ -142,3 +142,18 @@ def test_a_channel_that_does_not_scatter_has_the_ratio_one_not_nan():
     grad = jax.grad(lambda s: jax.jit(lambda m: incidence_ratio(m, 0.5))(
         Medium(medium.sigma_a, s, medium.eta)).sum())(medium.sigma_s_prime)
     assert np.isfinite(np.asarray(grad)).all()
+
+
+def test_h_function_loads_no_scipy():
+    """h_function runs in every render's start (the exit law): its Newton steps solve by
+    elimination in array operations, since jnp.linalg.solve's first LAPACK call loads SciPy's
+    BLAS (0.12 s; the render command's cold start went from 2.70x to 3.06x `import jax`,
+    2026-12-07). A fresh interpreter, as a command's start is."""
+    import subprocess
+    import sys
+
+    code = ("import sys, jax, jax.numpy as jnp; from jsss.diffusion.incidence import h_function; "
+            "h_function(jnp.asarray([0.5, 1.0]), jnp.asarray(1.0)).block_until_ready(); "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout
