@@ -132,7 +132,9 @@ def object_files(scene, folder: Path) -> tuple[str, Path | None]:
 def photo(mi, name, scene, card_obj, folder, *, spp, chunks, max_spp, target_noise, cache):
     """The path-traced photo (H, W, 3) and each pixel's standard error, from ``cache`` or Mitsuba."""
     cam = scene.camera
-    key = Path(cache) / f"{name}_dielectric_card_{cam.width}x{cam.height}_{chunks}x{spp}-{max_spp}.npz"
+    (x, y, z), side = CARDS[name]  # in the key: a moved card or another roughness is another photo
+    key = Path(cache) / (f"{name}_dielectric_card_{cam.width}x{cam.height}_{chunks}x{spp}-{max_spp}"
+                         f"_m{scene.material.roughness:g}_card{x:g},{y:g},{z:g},{side:g}.npz")
     if key.exists():
         data = np.load(key)
         return data["photo"], data["stderr"], float(data["seconds"])
@@ -140,26 +142,28 @@ def photo(mi, name, scene, card_obj, folder, *, spp, chunks, max_spp, target_noi
     bsdf = {"type": "roughdielectric", "distribution": "beckmann", "alpha": float(scene.material.roughness),
             "int_ior": eta, "ext_ior": 1.0}
     grey = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [CARD_REFLECTANCE] * 3}}
-    card = {"card": {"type": "obj", "filename": str(card_obj), "face_normals": True, "bsdf": grey}}
+    card = {"type": "obj", "filename": str(card_obj), "face_normals": True, "bsdf": grey}
     ply, sides = object_files(scene, folder)
-    if sides is not None:  # an open plane: the medium meets the walls and floor index-matched
-        card["sides"] = {"type": "ply", "filename": str(sides), "face_normals": True, "bsdf": {"type": "null"},
-                         "interior": tt._grey_medium(scene.material.medium, 0)}
     object_pixels = camera_buffers(scene.mesh, cam).mask.astype(bool)
+
+    def relative_noise(frames):  # each frame's noise per pixel, the median over the object
+        return np.median(frames.std(0, ddof=1)[object_pixels] / np.maximum(frames.mean(0)[object_pixels], 1e-12))
     tt.BLACK_WALLS = True  # curtains around a plane's walls (nothing else has walls)
     t0 = time.perf_counter()
     mean, stderr = [], []
     for c in range(3):
         medium = tt._grey_medium(scene.material.medium, c)
-        if sides is not None:
-            card["sides"]["interior"] = medium
-        mscene = tt._mitsuba_scene(mi, scene, ply, bsdf, medium, extra=card)
+        extra = {"card": card}
+        if sides is not None:  # an open plane: the medium meets the walls and floor index-matched
+            extra["sides"] = {"type": "ply", "filename": str(sides), "face_normals": True,
+                              "bsdf": {"type": "null"}, "interior": medium}
+        mscene = tt._mitsuba_scene(mi, scene, ply, bsdf, medium, extra=extra)
         first = np.array([tt._render(mi, mscene, spp, seed)[..., c] for seed in range(chunks)])
-        noise = np.median(first.std(0, ddof=1)[object_pixels] / np.maximum(first.mean(0)[object_pixels], 1e-12))
+        noise = relative_noise(first)
         scale = int(min(max_spp // spp, max(1, np.ceil((noise / np.sqrt(chunks) / target_noise) ** 2))))
         frames = first if scale == 1 else (first + (scale - 1) * np.array(  # the first pass is kept
             [tt._render(mi, mscene, spp * (scale - 1), chunks + seed)[..., c] for seed in range(chunks)])) / scale
-        per_pixel = np.median(frames.std(0, ddof=1)[object_pixels] / np.maximum(frames.mean(0)[object_pixels], 1e-12))
+        per_pixel = relative_noise(frames)
         print(f"  {name} channel {'RGB'[c]}: {chunks} x {spp * scale} spp, {100 * per_pixel / np.sqrt(chunks):.0f} % "
               f"noise per pixel (median over the object)", flush=True)
         mean.append(frames.mean(0))
