@@ -77,7 +77,7 @@ from jsss.render.environment import EnvironmentGeometry
 from jsss.render.profiles import render_profile
 from jsss.render.shading import specular_radiance
 
-__all__ = ["GAIN_PINNED", "RenderFit", "RenderFitError", "estimate_noise", "fit_pixels", "fit_render",
+__all__ = ["GAIN_PINNED", "MODEL_ERROR", "RenderFit", "RenderFitError", "estimate_noise", "fit_pixels", "fit_render",
            "gain_from_reference"]
 
 
@@ -139,6 +139,9 @@ class RenderFit:
     roughness, roughness_err : float
         The Beckmann roughness m of the fit's highlight (fitted with ``"fit"``, else the scene's,
         error 0).
+    model_error : float
+        The renderer's relative error in each channel's subsurface light that the errors above
+        include (fit_render's ``model_error``; 0: the photo's noise alone).
     """
 
     medium: Medium
@@ -168,6 +171,7 @@ class RenderFit:
     highlight_pixels: int = 0
     roughness: float = float("nan")
     roughness_err: float = 0.0
+    model_error: float = 0.0
 
     def as_dict(self) -> dict:
         """JSON-ready summary (lists per channel)."""
@@ -182,7 +186,7 @@ class RenderFit:
                 "parameters": list(self.parameter_names), "covariance": np.asarray(self.covariance).tolist(),
                 "warnings": list(self.warnings), "history": list(self.history), "highlight": self.highlight,
                 "highlight_pixels": int(self.highlight_pixels), "roughness": float(self.roughness),
-                "roughness_err": float(self.roughness_err)}
+                "roughness_err": float(self.roughness_err), "model_error": float(self.model_error)}
 
 
 def gain_from_reference(scene: Scene, photo, reflectance: float = 0.99, *, mask=None,
@@ -393,6 +397,49 @@ def _residual_fn(render, fit_gain, block, prior, robust=False, fit_roughness=Fal
 # stone of 0.8, 26 errors off, reported as converged).
 GAIN_PINNED = 0.05
 
+# The renderer's own error in a channel's subsurface light, as a relative standard error: the RMS
+# of (jsss / path tracer - 1) over the channel sums of its default frames against Mitsuba 3,
+# index-matched (docs/benchmarks/transport_truth.md, 2026-12-05: five calibration scenes and the
+# two examples, 21 channel sums from 0.953 to 1.016; RMS 1.5 %). A fit cannot know R_d better
+# than its renderer draws it: through the marble sphere's dielectric the errors of the photo's
+# noise alone were 0.4 % and R_d came out +1.2 to +1.7 % (z up to 4.6).
+MODEL_ERROR = 0.015
+
+
+def _model_error_covariance(J, scale_slopes, model_error):
+    r"""The parameters' covariance from the renderer's error in each channel's subsurface light.
+
+    A renderer whose channel ``c`` is off by a factor :math:`1 + \epsilon_c` moves the
+    least-squares solution by :math:`\delta\theta = -(J^T J)^{-1} J^T d_c\,\epsilon_c`, where
+    :math:`d_c` (``scale_slopes[:, c]``) is the slope of the whitened residuals in
+    :math:`\ln(1 + \epsilon_c)` (linearised, as the statistical errors are). With independent
+    :math:`\epsilon_c` of standard error ``model_error`` the covariance is
+    :math:`\epsilon^2 \sum_c \delta\theta_c \delta\theta_c^T`, added to the noise's. With the
+    gain fitted and nothing else to tell them apart, the shift goes into the gain; with a
+    reference's gain (its prior), into R_d and sigma_a.
+    """
+    inverse, _ = covariance(J, 1.0)  # on the directions the photo sees; the others are infinite already
+    shift = -inverse @ (np.asarray(J).T @ np.asarray(scale_slopes))
+    return model_error**2 * shift @ shift.T
+
+
+def _scale_slopes(theta, args, image, specular, fit_gain, block, robust, prior):
+    """(m, 3): the slopes of fit_render's residuals in the log of each channel's subsurface light
+    (``image`` without its ``specular`` part), the rest held: :func:`_model_error_covariance`'s
+    :math:`d_c`."""
+    _, photo, mask, inverse_sigma, _, exposure = args
+    gain = jnp.exp(theta[6]) if fit_gain else exposure[0]
+    subsurface = image - specular
+
+    def residuals(log_scale):
+        model = jnp.exp(log_scale) * subsurface + specular
+        pixels = (_block_sums((gain * model - photo) * mask, block) * inverse_sigma).reshape(-1)
+        pixels = _huber(pixels) if robust else pixels
+        return jnp.concatenate([pixels, jnp.zeros(int(prior), pixels.dtype)])  # the reference's row does not move
+
+    return np.asarray(jax.jacfwd(residuals)(jnp.zeros(3, image.dtype)))
+
+
 NO_EXPOSURE = ("the photo's exposure is unknown, and a photo's brightness is gain x R_d: give a reference (a photo "
                "of a white target of known reflectance: fitting.render.gain_from_reference, jsss-render fit "
                "--reference-scene/--reference-photo), the camera's gain (gain=G, --gain G; 1 for calibrated "
@@ -580,7 +627,8 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
                g: float | None = None, init: Medium | None = None, gain=None, gain_err: float = 0.0, specular: bool = True,
                max_steps: int = 200, replans: int = 3, unconstrained: float = 0.5, dtype=jnp.float64,
                block: int = 1, rim_mm: float = 0.0, highlight: str = "auto", highlight_share: float = HIGHLIGHT_SHARE,
-               roughness_range: float = ROUGHNESS_RANGE, progress=None) -> RenderFit:
+               roughness_range: float = ROUGHNESS_RANGE, model_error: float = MODEL_ERROR,
+               progress=None) -> RenderFit:
     """Fit the scene's homogeneous material to ``photo``, a linear HDR image from the scene's camera.
 
     Parameters
@@ -663,6 +711,12 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     highlight_share, roughness_range : float
         The mask's threshold (share of the pixel's light, default :data:`HIGHLIGHT_SHARE`) and
         the factor of the roughness's uncertainty (default :data:`ROUGHNESS_RANGE`).
+    model_error : float
+        The renderer's relative standard error in each channel's subsurface light (default
+        :data:`MODEL_ERROR`, 1.5 %: its default frames against a path tracer), propagated into
+        the errors beside the photo's noise (:func:`_model_error_covariance`): with a reference's
+        gain a channel drawn 1.5 % dark is fitted about 1.5 % bright in R_d, whatever the photo's
+        noise. 0 for a photo this renderer made itself (the errors are then the noise's alone).
     max_steps, replans, unconstrained
         Solver steps per round; re-plans of the variances; the relative standard error above
         which a parameter is reported as not constrained by the image.
@@ -705,6 +759,8 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     if not (0 < float(highlight_share) < 1):
         raise RenderFitError(f"highlight_share must lie in (0, 1) (0.02: the highlight is 2 % of the pixel's light); "
                              f"got {highlight_share!r}.")
+    if not (np.isfinite(float(model_error)) and float(model_error) >= 0):
+        raise RenderFitError(f"model_error must be a relative error >= 0 (0.015 for 1.5 %); got {model_error!r}.")
     if not (float(roughness_range) >= 1 and np.isfinite(float(roughness_range))):
         raise RenderFitError(f"roughness_range must be a finite factor >= 1; got {roughness_range!r}.")
     # No surface reflection in the fit: nothing to mask or fit
@@ -893,6 +949,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         history.append("noise estimated from the photo (adjacent residuals): "
                        + ", ".join(f"{c} {100 * s / max(v, 1e-300):.2g} %" for c, s, v in
                                    zip("RGB", np.median(sigma[use], axis=0), level)) + " of the median pixel")
+    if model_error > 0:
+        history.append(f"the errors include the renderer's own, {100 * float(model_error):g} % of each channel's "
+                       "subsurface light (model_error), beside the photo's noise")
     r = np.asarray(residuals(theta, args))
     m = int(block_used.sum()) * 3 + int(prior)  # used tiles times channels, and the reference's gain
     chi2 = reduced_chi2(r @ r, m, n_params)
@@ -915,6 +974,13 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
                              f"({plan.method}, {profile_model}); "
                              "this is a bug in jsss: please report it with the scene.")
     cov, null = covariance(J, error_scale(chi2))
+    image = draw(theta)
+    if model_error > 0:  # the renderer's own error: a share of the light no photo's noise shows
+        specular_part = (_specular_image(parts, jnp.exp(theta[-1])) if fit_roughness
+                         else held if highlight in ("mask", "model") else jnp.zeros_like(image))
+        slopes = _scale_slopes(theta, args, image, specular_part, fit_gain, block, robust, prior)
+        cov = cov + _model_error_covariance(J, slopes, float(model_error))
+    image = np.asarray(image)
     theta_np = np.asarray(theta)
     rel = standard_errors(np.eye(len(theta_np)), cov, null)  # errors of logarithms = relative errors
     A = np.asarray(jax.jacfwd(_artist)(theta[:6], profile_model, g, eta))
@@ -950,7 +1016,6 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         notes.append(f"poor fit: chi2/dof {chi2:.1f} (expected about 1); the errors are widened by its square root. "
                      "Likely a wrong eta, geometry or light, a noise level set too low, or the profile model's bias")
     final = Medium(jnp.asarray(sigma_a), jnp.asarray(sigma_s), material.eta)
-    image = np.asarray(draw(theta))
     if fit_roughness:  # roughness (the scene's) stays what the frames hold, until here
         roughness, roughness_err = float(np.exp(theta_np[-1])), float(np.exp(theta_np[-1]) * rel[-1])
     else:
@@ -973,4 +1038,4 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
                      and bool(np.all(np.isfinite(rel))),
                      int(use.sum()), plan.method, profile_model,
                      image * gain_value, use, tuple(notes), tuple(history), np.asarray(sigma), unresolved,
-                     highlight, masked, roughness, roughness_err)
+                     highlight, masked, roughness, roughness_err, float(model_error))

@@ -51,7 +51,8 @@ def check_flags(args) -> None:
                  "light only")),
                (args.method not in ("auto", "texture-space"), f"--method {args.method}",
                 "a map is fitted in texture space (the renderer's texels carry it)"),
-               (args.rim_mm != 0, "--rim-mm", "leave the rim out with --mask instead")]
+               (args.rim_mm != 0, "--rim-mm", "leave the rim out with --mask instead"),
+               (args.model_error is not None, "--model-error", "the map fit's errors are the photo's noise alone")]
     for on, flag, why in refused:
         if on:
             raise UsageError(f"{flag} does not go with --albedo-map: {why}")

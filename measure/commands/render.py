@@ -170,6 +170,9 @@ def _fit_parser(commands, methods):
     p.add_argument("--accuracy", type=float, default=0.001,
                    help="accuracy target of the fit's renders (default 0.001: a fit needs a stricter render than "
                         "a display does)")
+    p.add_argument("--model-error", type=float, default=None, metavar="E",
+                   help="the renderer's relative error in each channel's light, carried into the stated errors "
+                        "beside the photo's noise (default 0.015: its frames against a path tracer; 0: noise only)")
     exposure = p.add_argument_group("the photo's exposure (one of these is required; see below)")
     exposure.add_argument("--reference-scene", metavar="CARD.toml",
                           help="scene of a white or grey Lambertian target as photographed (same camera and lights)")
@@ -412,6 +415,8 @@ def _fit(args) -> int:
             raise UsageError(f"--noise must be 'estimate' or a relative error > 0 (0.01 for 1 %); got {args.noise}.")
     if not 0 < args.accuracy < 1:
         raise UsageError(f"--accuracy must lie in (0, 1); got {args.accuracy}.")
+    if args.model_error is not None and not (math.isfinite(args.model_error) and 0 <= args.model_error < 1):
+        raise UsageError(f"--model-error must be a relative error in [0, 1) (0.015 for 1.5 %); got {args.model_error:g}.")
     start(spectra=True)
     from fitting.render import fit_render
     from jsss.render import load_scene
@@ -444,8 +449,9 @@ def _fit(args) -> int:
         return _fit_map.fit_map(args, scene, photo, mask, noise, gain, gain_err, exposure, say)
     gain, gain_err, exposure = _exposure(args, photo, say)
     t0 = time.perf_counter()
+    model_error = {} if args.model_error is None else {"model_error": args.model_error}
     result = fit_render(scene, photo, noise=noise, loss=args.loss, mask=mask, saturation=args.saturation, method=method,
-                        accuracy=args.accuracy, profile_model=args.profile, g=args.g, gain=gain, gain_err=gain_err,
+                        accuracy=args.accuracy, **model_error, profile_model=args.profile, g=args.g, gain=gain, gain_err=gain_err,
                         specular=not args.no_specular, highlight=args.highlight, rim_mm=args.rim_mm,
                         progress=lambda line: say(f"{args.scene}: {line}"))
     seconds = time.perf_counter() - t0
