@@ -150,6 +150,7 @@ def test_methods_without_spread_report_the_mean_free_path_unconstrained(scene, m
     ("nan", "pixels on the object are NaN or infinite"),
     ("lights", "the scene has no lights"),
     ("channels", "expected an RGB image"),
+    ("model_error", "model_error must be a relative error >= 0"),
 ])
 def test_bad_input_is_one_clear_error(scene, case, message):
     photo = np.ones((48, 64, 3))
@@ -162,7 +163,7 @@ def test_bad_input_is_one_clear_error(scene, case, message):
     elif case == "channels":
         photo = np.ones((48, 64))
     with pytest.raises(RenderFitError, match=message):
-        fit_render(scene, photo, gain="fit")
+        fit_render(scene, photo, gain="fit", **({"model_error": float("nan")} if case == "model_error" else {}))
 
 
 def test_fit_command_writes_parameters_a_renderable_scene_and_a_figure(scene, tmp_path):
@@ -177,6 +178,7 @@ def test_fit_command_writes_parameters_a_renderable_scene_and_a_figure(scene, tm
     out = run(str(tmp_path / "photo.exr"), "--json", "-o", str(tmp_path / "fit"), "--fit-gain")
     assert out.returncode == 0, out.stderr
     result = json.loads(out.stdout)
+    assert result["model_error"] == MODEL_ERROR
     for key in ("sigma_a", "sigma_s_prime", "sigma_a_err", "sigma_s_prime_err"):
         assert len(result[key]) == 3 and all(np.isfinite(result[key]))
     truth = scene.material.medium
@@ -189,6 +191,8 @@ def test_fit_command_writes_parameters_a_renderable_scene_and_a_figure(scene, tm
     bad = run(str(tmp_path / "small.exr"), "--fit-gain")
     assert bad.returncode == 2
     assert bad.stderr.strip().count("\n") == 0 and "32 x 24 pixels" in bad.stderr
+    bad = run(str(tmp_path / "photo.exr"), "--fit-gain", "--model-error", "-0.1")
+    assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "--model-error" in bad.stderr, bad.stderr
 
 
 def test_rim_mm_leaves_out_the_pixels_near_an_open_surfaces_rim():
