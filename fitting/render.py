@@ -33,7 +33,9 @@ the result says which (:attr:`RenderFit.highlight`).
 What the image constrains is reported, not assumed (:mod:`fitting.statistics`): the covariance
 :math:`s^2 (J^T J)^{-1}` at the solution, with :math:`s^2 = \max(1, \chi^2/(m - n))` so that a
 model that cannot fit the photo (chi^2 per degree of freedom above 1) widens its errors
-rather than claiming noise-level precision, and a warning for each parameter whose relative
+rather than claiming noise-level precision, plus the covariance of the renderer's own error
+(``model_error``, a relative error in each channel's light that no photo's noise shows,
+propagated through the same linearised solution), and a warning for each parameter whose relative
 standard error exceeds ``unconstrained`` (e.g. the mean free path of a uniformly lit object,
 or any spread under Lambert, which has none). The artist's parameters -- the total diffuse
 reflectance :math:`R_d` (the profile model's, per unit entering flux at normal incidence) and
@@ -103,7 +105,8 @@ class RenderFit:
     mean_free_path, mean_free_path_err : ndarray [mm]
         :math:`1/(\\sigma_a + \\sigma_s')` and its error.
     covariance : ndarray (n, n)
-        Of the fitted parameters ``parameter_names`` (logarithms of sigma_a, sigma_s', gain).
+        Of the fitted parameters ``parameter_names`` (logarithms of sigma_a, sigma_s', gain): the
+        photo's noise's and the renderer's own error's (``model_error``), summed.
     chi2_reduced : float
         chi^2 per degree of freedom of the whitened residuals (about 1 when model and noise fit;
         with Huber's loss, their median square over its Gaussian value 0.4549, which outliers

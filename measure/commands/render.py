@@ -65,7 +65,9 @@ as the camera sees it, without silhouette and grazing pixels, without saturated 
 standard errors, the artist's reflectance and mean free path, the covariance, warnings),
 PHOTO.fit.toml (the scene with the fitted material, which jsss-render renders as it is; the
 rest of the scene file is kept, comments included) and PHOTO.fit.png (photo, fit and whitened
-residual side by side). Exit status 2 on bad input (one line).
+residual side by side). The standard errors hold the photo's noise (estimated from it) and the
+renderer's own error, 1.5 % of each channel's light (--model-error). Exit status 2 on bad input
+(one line).
 
 A photo taken through the surface holds the specular highlight, whose pixels would steer the
 fit if the scene's roughness were wrong: --highlight fit fits the roughness (the default where
