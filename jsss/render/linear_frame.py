@@ -31,23 +31,36 @@ from the stages of :class:`jsss.render.methods.TextureSpace`, the per-pixel part
 :func:`jsss.render.shading.frame_radiance`: at the plan's own material
 :meth:`LinearFrame.radiance` is that frame up to rounding (tested). Away from it, what
 depends on the medium besides the weights and the albedo is held at the plan's: the
-irradiance's oblique-incidence law and the depth at which point lights are read
-(:mod:`jsss.diffusion.incidence`), and the legs' steps and the first bounce's share of
-their move (:mod:`jsss.render.last_leg`, :mod:`jsss.render.first_leg`); a fit (:func:`fitting.render.fit_render`) re-plans when
-those move. The exit law (:mod:`jsss.diffusion.exit_law`) depends on the albedo alone and
+legs' steps and the first bounce's share of their move (:mod:`jsss.render.last_leg`,
+:mod:`jsss.render.first_leg`); a fit (:func:`fitting.render.fit_render`) re-plans when those
+move. The irradiance's oblique-incidence law and the depth at which point lights are read
+(:mod:`jsss.diffusion.incidence`) follow the medium given to :meth:`LinearFrame.radiance`, read at
+the pixel: the diffusion light is scaled by :math:`\rho(x) = \sum_l E_l(x) f_l(x; m) / \sum_l E_l(x)
+f_l(x; m_0)`, each light's transmitted irradiance :math:`E_l` at the pixel times its laws at the
+medium :math:`m` over those at the plan's :math:`m_0`. Exact where the laws' factor is uniform
+over the profile's reach (a directional light on a plane); where it varies (a point light's
+foot) the error is that variation across the profile, second order in the move. An
+environment's share, and single scattering's deposit depth, stay held. The exit law (:mod:`jsss.diffusion.exit_law`) depends on the albedo alone and
 follows it: :meth:`LinearFrame.radiance` recomputes the lobe from it.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ..diffusion.exit_law import exit_law
+from ..diffusion.incidence import deposit_depth, incidence_law
 from ..medium import Medium
+from .environment import EnvironmentGeometry
 from .last_leg import moved_ratio
+from .lighting import depth_falloff, irradiance
 from .methods import TextureSpace, camera_parts
+from .passes import Pass
 from .planner import Plan
 from .renderer import render_params
 from .scene import Scene
@@ -75,6 +88,13 @@ class LinearFrame(eqx.Module):
     cos_view : (H, W) or None, the exit cosine toward the camera (with ``exit_weights``)
     eta : (C,) or None, the relative index (with ``exit_weights``)
     first_bounce_apart : whether single scattering runs apart (the exit law's kernel without it)
+    law_light : (L, H, W, C) or None [W/mm^2], each point or directional light's transmitted
+        irradiance at the pixel without the laws; None when the plan runs neither law
+    law_cosine, law_distance : (L, H, W) or None, each light's incidence cosine and distance [mm]
+        (infinite for a directional light) at the pixel
+    law_held : (L, H, W, C) or None, the laws' factor at the plan's medium
+    law_rest : (H, W, C) or None [W/mm^2], an environment's share (its laws held)
+    oblique, deposit : whether the plan runs the oblique-incidence law and the deposit depth
     """
 
     basis: jax.Array
@@ -88,13 +108,41 @@ class LinearFrame(eqx.Module):
     cos_view: jax.Array | None = None
     eta: jax.Array | None = None
     first_bounce_apart: bool = eqx.field(static=True, default=False)
+    law_light: jax.Array | None = None
+    law_cosine: jax.Array | None = None
+    law_distance: jax.Array | None = None
+    law_held: jax.Array | None = None
+    law_rest: jax.Array | None = None
+    oblique: bool = eqx.field(static=True, default=False)
+    deposit: bool = eqx.field(static=True, default=False)
 
-    def radiance(self, weights, albedo=None):
+    def law_ratio(self, medium: Medium):
+        r"""(H, W, C): the diffusion light's factor at ``medium`` over the plan's, from the
+        irradiance's laws read at each pixel (module docstring); 1 without them."""
+        if self.law_light is None:
+            return jnp.ones(self.exit_lobe.shape, self.basis.dtype)
+        factor = jnp.ones(self.law_light.shape, self.basis.dtype)
+        if self.oblique:
+            factor = factor * incidence_law(medium)(self.law_cosine)
+        if self.deposit:
+            depth = deposit_depth(medium)
+            for i in range(self.law_light.shape[0]):  # depth_falloff reads distance and cosine
+                geometry = _Geometry(self.law_cosine[i], self.law_distance[i])
+                factor = factor.at[i].multiply(depth_falloff(geometry, depth, self.basis.dtype))
+        now = (self.law_light * factor).sum(0) + self.law_rest
+        held = (self.law_light * self.law_held).sum(0) + self.law_rest
+        lit = held > 0
+        return jnp.where(lit, now / jnp.where(lit, held, 1.0), 1.0)  # double where: unlit pixels stay 1
+
+    def radiance(self, weights, albedo=None, medium=None):
         r"""Linear radiance (H, W, C) for Gaussian ``weights`` (n, C) on :attr:`variances` and the
         reduced albedo ``albedo`` (C,) :math:`\sigma_s'/\sigma_t'` (read only when the frame has
         single scattering or the exit-angle pass, whose lobe it sets). Linear in ``weights``;
-        differentiable in both."""
+        differentiable in all. ``medium``: the medium whose oblique-incidence law and deposit
+        depth the diffusion light follows (:meth:`law_ratio`); None holds the plan's."""
         exitance = jnp.einsum("nc,nhwc->hwc", weights.astype(self.basis.dtype), self.basis)
+        if medium is not None and self.law_light is not None:
+            exitance = exitance * self.law_ratio(medium)
         if albedo is None and (self.single_radiance is not None or self.exit_weights is not None):
             raise ValueError("LinearFrame.radiance: this frame has single scattering or the exit-angle pass; pass "
                              "albedo= (sigma_s' / (sigma_a + sigma_s') per channel).")
@@ -173,7 +221,42 @@ def linear_frame(scene: Scene, plan: Plan, *, dtype=jnp.float64, blur_dtype=None
             "exit_weights": exit_weights(law, [g.astype(dtype) for g in shading.lights], params.radiant, params.eta),
             "cos_view": jnp.asarray((shading.normal * shading.view).sum(-1), dtype), "eta": params.eta,
             "first_bounce_apart": single is not None}
+    # The laws follow the medium at the pixel, from the pixel's own lights; not with translucent
+    # shadow maps, whose light entered on the far side (on a thin fin lit from behind, read at
+    # the front they moved the frame further from the medium's own than holding them did).
+    follow = (params.oblique or params.deposit) and not plan.on(Pass.TRANSLUCENT_SHADOW_MAPS)
+    law_parts = _law_parts(params, prepared.shading.lights, dtype) if follow else {}
     return LinearFrame(images, jnp.asarray(plan.variances, dtype), lobe,
                        jnp.asarray(prepared.shading.coverage, dtype), single_radiance, single_exitance, specular,
-                       **exit_parts)
+                       **exit_parts, **law_parts)
+
+
+class _Geometry(NamedTuple):
+    """What :func:`jsss.render.lighting.depth_falloff` reads of a light's geometry."""
+    cosine: jax.Array
+    distance: jax.Array
+
+
+def _law_parts(params, lights, dtype) -> dict:
+    """:class:`LinearFrame`'s ``law_*`` fields: each point or directional light at the pixels, its
+    irradiance without the laws and the laws' factor at the plan's medium; an environment apart."""
+    radiant = params.radiant.astype(dtype)
+    rest = jnp.zeros(tuple(np.shape(lights[0].cosine)) + (radiant.shape[-1],), dtype)
+    light, held, cosine, distance = [], [], [], []
+    for i, g in enumerate(lights):
+        if isinstance(g, EnvironmentGeometry):
+            rest = rest + irradiance([g], radiant[i:i + 1], params.eta, medium=params.oblique)
+            continue
+        g = g.astype(dtype)
+        bare = irradiance([g], radiant[i:i + 1], params.eta)
+        lawful = irradiance([g], radiant[i:i + 1], params.eta, medium=params.oblique, deposit=params.deposit)
+        light.append(bare)
+        held.append(jnp.where(bare > 0, lawful / jnp.where(bare > 0, bare, 1.0), 1.0))
+        cosine.append(jnp.clip(g.cosine, 0.0, 1.0))
+        distance.append(jnp.broadcast_to(jnp.asarray(g.distance, dtype), g.cosine.shape))
+    if not light:
+        return {}
+    return {"law_light": jnp.stack(light), "law_cosine": jnp.stack(cosine), "law_distance": jnp.stack(distance),
+            "law_held": jnp.stack(held), "law_rest": rest, "oblique": params.oblique is not None,
+            "deposit": params.deposit is not None}
 

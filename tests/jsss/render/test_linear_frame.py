@@ -103,3 +103,64 @@ def test_only_texture_space_has_a_linear_frame(fin):
     scene, _ = fin
     with pytest.raises(ValueError, match="texture space only; the plan's method is lambert"):
         linear_frame(scene, plan_scene(scene, method="lambert"))
+
+
+def _moved(scene, medium):
+    return dataclasses.replace(scene, material=dataclasses.replace(scene.material, medium=medium))
+
+
+def _laws_only(plan, *, shadow_maps=False):
+    """The irradiance's two laws on; the legs (held by the frame) off; shadow maps as asked."""
+    plan = plan.replace(Pass.OBLIQUE_INCIDENCE, True, "test").replace(Pass.DEPOSIT_DEPTH, True, "test")
+    plan = plan.replace(Pass.LAST_LEG, False, "test: held").replace(Pass.FIRST_LEG, False, "test: held")
+    return plan.replace(Pass.TRANSLUCENT_SHADOW_MAPS, shadow_maps, "test")
+
+
+def test_the_irradiances_laws_follow_the_medium_exactly_where_they_are_uniform():
+    """A plane under a slanted directional light: every texel gets the same oblique-incidence
+    factor, so the frame of the plan's medium, given another medium, is render()'s frame of that
+    medium on the same plan to rounding; holding the law is 3-5 % off (the factor's change)."""
+    scene = parse_scene(scene_dict(
+        geometry={"shape": "plane", "width": 40.0},
+        material={"sigma_a": [0.02, 0.1, 0.5], "sigma_s_prime": [1.0, 1.0, 1.0], "eta": 1.3},
+        lights=[{"type": "directional", "direction": [1.0, 0.0, -0.6]}],
+        camera={"position": [0.0, -60.0, 120.0], "look_at": [0.0, 0.0, 0.0], "fov": 20, "resolution": [32, 24]},
+        render={"texture_size": 64, "accuracy": 0.05}))
+    plan = _laws_only(plan_scene(scene, method="texture-space"))
+    frame = linear_frame(scene, plan, dtype=jnp.float64)
+    assert frame.law_light is not None and frame.oblique and frame.deposit
+    other = Medium(np.array([0.2, 0.5, 0.05]), np.array([0.8, 1.0, 1.0]), scene.material.medium.eta)
+    weights, albedo = _weights_and_albedo(_moved(scene, other), plan)
+    truth = np.asarray(render(_moved(scene, other), plan, dtype=jnp.float64).radiance)
+    followed = np.asarray(frame.radiance(weights, albedo, medium=other))
+    held = np.asarray(frame.radiance(weights, albedo))
+    peak = np.abs(truth).max()
+    np.testing.assert_allclose(followed, truth, rtol=0, atol=1e-10 * peak)
+    assert np.abs(held - truth).max() > 1e-2 * peak, "a held law would pass: the check would not bite"
+
+
+@pytest.mark.parametrize("other", [Medium(np.array([0.3, 0.6, 1.0]), np.array([0.9, 0.9, 1.0]), 1.3),
+                                   Medium(np.array([0.03, 0.06, 0.2]), np.array([0.5, 0.6, 1.0]), 1.3)],
+                         ids=["darker", "longer"])
+def test_the_irradiances_laws_follow_the_medium_at_a_point_lights_foot(fin, other):
+    """The fin under its point light 40 mm away, where the deposit depth's falloff and the
+    oblique law vary over the profile's reach: followed at the pixel the frame of another
+    medium is within 0.4 % RMS per pixel of render()'s (measured 0.25 % for both media) and
+    at least 2x closer than with the laws held (0.72 % and 1.05 %); its channel sums within
+    0.15 % (held: 0.4-1.4 %). Under translucent shadow maps the frame holds them (None)."""
+    scene, plan = fin
+    assert linear_frame(scene, _laws_only(plan, shadow_maps=True), dtype=jnp.float64).law_light is None
+    plan = _laws_only(plan)
+    frame = linear_frame(scene, plan, dtype=jnp.float64)
+    moved = _moved(scene, other)
+    weights, albedo = _weights_and_albedo(moved, plan)
+    truth = np.asarray(render(moved, plan, dtype=jnp.float64).radiance)
+    lit = truth > 1e-3 * truth.max()
+
+    def rms(image):
+        return float(np.sqrt(np.mean(((image - truth)[lit] / truth[lit]) ** 2)))
+
+    followed, held = (np.asarray(frame.radiance(weights, albedo, medium=m)) for m in (other, None))
+    assert rms(followed) <= 0.004 and rms(followed) <= 0.5 * rms(held), (rms(followed), rms(held))
+    sums = followed.sum((0, 1)) / truth.sum((0, 1))
+    np.testing.assert_allclose(sums, 1.0, atol=1.5e-3)
