@@ -34,8 +34,8 @@ What the image constrains is reported, not assumed (:mod:`fitting.statistics`): 
 :math:`s^2 (J^T J)^{-1}` at the solution, with :math:`s^2 = \max(1, \chi^2/(m - n))` so that a
 model that cannot fit the photo (chi^2 per degree of freedom above 1) widens its errors
 rather than claiming noise-level precision, plus the covariance of the renderer's own error
-(``model_error``, a relative error in each channel's light that no photo's noise shows,
-propagated through the same linearised solution), and a warning for each parameter whose relative
+(``model_error``, a relative error in each channel's light that no photo's noise shows, and the
+plan's own where the fit re-planned, propagated through the same linearised solution), and a warning for each parameter whose relative
 standard error exceeds ``unconstrained`` (e.g. the mean free path of a uniformly lit object,
 or any spread under Lambert, which has none). The artist's parameters -- the total diffuse
 reflectance :math:`R_d` (the profile model's, per unit entering flux at normal incidence) and
@@ -62,6 +62,7 @@ from jsss.diffusion.incidence import incidence_ratio
 from jsss.medium import Medium
 from jsss.numerics import warn_if_low_precision
 from jsss.render import (
+    LinearFrame,
     Material,
     Method,
     Pass,
@@ -340,7 +341,14 @@ def _texture_radiance(medium, data, profile_model: str, g: float):
     material = Material("fit", np.ones(3), medium=medium, profile_model=profile_model, g=g)
     weights = render_profile(material, frame.variances, radii=radii, medium=medium).weights
     albedo = medium.sigma_s_prime / (medium.sigma_a + medium.sigma_s_prime)
-    return frame.radiance(weights, albedo)
+    return frame.radiance(weights, albedo, medium=medium)  # the irradiance's laws follow the medium
+
+
+def _follows_laws(data) -> bool:
+    """Whether the fit's data hold a texture-space frame that follows the irradiance's laws."""
+    frames = [leaf for leaf in jax.tree.leaves(data, is_leaf=lambda x: isinstance(x, LinearFrame))
+              if isinstance(leaf, LinearFrame)]
+    return bool(frames) and frames[0].law_light is not None
 
 
 @functools.lru_cache(maxsize=16)
@@ -351,6 +359,9 @@ def _texture_render(profile_model: str, g: float):
 
 LAW_REPLAN = 0.002  # re-plan when the oblique-incidence law, the deposit depth or a leg's step moves a pixel by more:
 # at 1 % a held law 0.78 % off put marble's sigma_a +33 % (4.3 stated errors) in the tests' gain fit
+LAW_FOLLOWED = 0.05  # the same for the irradiance's two laws where texture space's frame follows them
+# (jsss.render.linear_frame, read at the pixel): what it misses is second order, 0.08 % RMS per pixel
+# on the ketchup plane after a 4.2 % move under the lamp (1.9 % with the law held)
 
 
 def _incidence_moved(before: Scene, after: Scene) -> float:
@@ -372,6 +383,54 @@ def _huber(r):
     return jnp.where(magnitude <= HUBER_K, r, jnp.sign(r) * outer)
 
 
+def _local_level(photo, use, pixels: float = 1.0) -> np.ndarray:
+    """The photo averaged over its neighbours within the fitted pixels: a Gaussian of ``pixels``
+    standard deviation, the pixel itself left out (its own noise would make a level it is
+    weighted by lean its way: -1.3 % in a 20 %-noise fit with it in) and the background too
+    (normalised convolution at the object's outline)."""
+    impulse = np.zeros((9, 9))
+    impulse[4, 4] = 1.0
+    own = ndimage.gaussian_filter(impulse, pixels)[4, 4]  # the kernel's weight on the pixel itself
+    weight = use.astype(float)
+    values = np.where(use[..., None], photo, 0.0)
+    summed = ndimage.gaussian_filter(values, (pixels, pixels, 0)) - own * values
+    total = ndimage.gaussian_filter(weight, pixels) - own * weight
+    return summed / np.maximum(total, 1e-12)[..., None]
+
+
+def provisional_noise(photo, use, relative: float | None = None) -> np.ndarray:
+    r"""Each pixel's standard error before any fit: ``relative`` times the pixel's local level, or
+    (``None``) :func:`estimate_noise` of the photo's own adjacent differences, binned by the level.
+
+    The level is the photo averaged over a pixel's neighbours (:func:`_local_level`), not the
+    pixel's own noisy value: with :math:`\sigma \propto` the noisy value, a pixel pulled dark by
+    its noise weighs more than one pulled bright, and the fit comes out dark (Neyman's
+    :math:`\chi^2`). Estimated, the noise also sets Huber's threshold at the photo's own scale: a
+    provisional 5 % of the pixel value on a path-traced photo with 16-28 % noise per pixel made
+    Huber's loss nearly a median fit: with both, the scale of the truth's model that the loss
+    preferred on the ketchup plane's path-traced red (Mitsuba, 28 % noise per pixel, heavy
+    tailed) was 0.87; with this noise 0.97, beside the photo's mean over the model's, 0.98 (the
+    renderer's own error). Fewer than 200 adjacent fitted pixels (too few to estimate): 5 % of
+    the level.
+    """
+    level = np.maximum(np.abs(_local_level(photo, use)), 0.0)
+    floor = np.maximum(0.01 * np.percentile(level[use], 99, axis=0), 1e-300)
+    level = np.maximum(level, floor)  # dark pixels: 1 % of the channel's bright end
+    if relative is not None:
+        return relative * level
+    try:
+        return np.maximum(estimate_noise(photo, level, use), 1e-3 * level)
+    except RenderFitError:
+        return 0.05 * level
+
+
+def _pixel_residuals(model, photo, mask, inverse_sigma, block, robust):
+    """The photo's whitened residuals (flat), over ``block`` x ``block`` tiles, Huber-transformed
+    with ``robust``: ``model`` is the frame times the gain."""
+    pixels = (_block_sums((model - photo) * mask, block) * inverse_sigma).reshape(-1)
+    return _huber(pixels) if robust else pixels
+
+
 @functools.lru_cache(maxsize=16)
 def _residual_fn(render, fit_gain, block, prior, robust=False, fit_roughness=False):
     """Whitened residuals of the photo (Huber-transformed with ``robust``); with ``prior``, one
@@ -384,9 +443,7 @@ def _residual_fn(render, fit_gain, block, prior, robust=False, fit_roughness=Fal
         medium = _medium(theta, eta)
         gain = jnp.exp(theta[6]) if fit_gain else exposure[0]
         image = render(medium, data, jnp.exp(theta[-1])) if fit_roughness else render(medium, data)
-        pixels = (_block_sums((gain * image - photo) * mask, block) * inverse_sigma).reshape(-1)
-        if robust:
-            pixels = _huber(pixels)
+        pixels = _pixel_residuals(gain * image, photo, mask, inverse_sigma, block, robust)
         if not prior:
             return pixels
         return jnp.concatenate([pixels, ((theta[6] - exposure[1]) * exposure[2])[None]])
@@ -408,13 +465,12 @@ GAIN_PINNED = 0.05
 # noise alone were 0.4 % and R_d came out +1.2 to +1.7 % (z up to 4.6).
 MODEL_ERROR = 0.015
 
-
-def _model_error_covariance(J, scale_slopes, model_error):
+def _model_error_covariance(J, slopes, model_error):
     r"""The parameters' covariance from the renderer's error in each channel's subsurface light.
 
     A renderer whose channel ``c`` is off by a factor :math:`1 + \epsilon_c` moves the
     least-squares solution by :math:`\delta\theta = -(J^T J)^{-1} J^T d_c\,\epsilon_c`, where
-    :math:`d_c` (``scale_slopes[:, c]``) is the slope of the whitened residuals in
+    :math:`d_c` (column ``c`` of ``slopes``) is the slope of the whitened residuals in
     :math:`\ln(1 + \epsilon_c)` (linearised, as the statistical errors are). With independent
     :math:`\epsilon_c` of standard error ``model_error`` the covariance is
     :math:`\epsilon^2 \sum_c \delta\theta_c \delta\theta_c^T`, added to the noise's. With the
@@ -422,11 +478,11 @@ def _model_error_covariance(J, scale_slopes, model_error):
     reference's gain (its prior), into R_d and sigma_a.
     """
     inverse, _ = covariance(J, 1.0)  # on the directions the photo sees; the others are infinite already
-    shift = -inverse @ (np.asarray(J).T @ np.asarray(scale_slopes))
+    shift = -inverse @ (np.asarray(J).T @ np.asarray(slopes))
     return model_error**2 * shift @ shift.T
 
 
-def _scale_slopes(theta, args, image, specular, fit_gain, block, robust, prior):
+def _model_error_slopes(theta, args, image, specular, fit_gain, block, robust, prior):
     """(m, 3): the slopes of fit_render's residuals in the log of each channel's subsurface light
     (``image`` without its ``specular`` part), the rest held: :func:`_model_error_covariance`'s
     :math:`d_c`."""
@@ -436,11 +492,34 @@ def _scale_slopes(theta, args, image, specular, fit_gain, block, robust, prior):
 
     def residuals(log_scale):
         model = jnp.exp(log_scale) * subsurface + specular
-        pixels = (_block_sums((gain * model - photo) * mask, block) * inverse_sigma).reshape(-1)
-        pixels = _huber(pixels) if robust else pixels
+        pixels = _pixel_residuals(gain * model, photo, mask, inverse_sigma, block, robust)
         return jnp.concatenate([pixels, jnp.zeros(int(prior), pixels.dtype)])  # the reference's row does not move
 
     return np.asarray(jax.jacfwd(residuals)(jnp.zeros(3, image.dtype)))
+
+
+def _plan_error_covariance(J, theta, args, image, differences, fit_gain, block, robust, prior):
+    r"""The parameters' covariance from the plan's own error, observed: each of ``differences``
+    (H, W, C) is the estimate's frame under a re-plan less its frame under the plan before, two
+    plans that each claim the fit's accuracy. As :func:`_model_error_covariance`, each moves the
+    solution by :math:`-(J^T J)^{-1} J^T d_j`, with :math:`d_j` the whitened residuals' change;
+    the covariance is the mean of those shifts' outer products: the estimate's own plan may be as
+    wrong as two plans disagree. Only the last re-plan is passed: the first plan was made for the
+    start, which may be far from any estimate. On the ketchup plane through its dielectric, plans that each
+    claimed 0.1 % raised the chi^2 at one estimate by 60-260 (of 34500) and sent the red mean free
+    path from 5.6 to 10 mm over three rounds, while its stated error was 3-8 %."""
+    _, photo, mask, inverse_sigma, _, exposure = args
+    gain = jnp.exp(theta[6]) if fit_gain else exposure[0]
+
+    def whitened(model):
+        pixels = _pixel_residuals(gain * model, photo, mask, inverse_sigma, block, robust)
+        return np.concatenate([np.asarray(pixels), np.zeros(int(prior))])  # the reference's row does not move
+
+    base = whitened(image)
+    moves = np.stack([whitened(image + jnp.asarray(d, image.dtype)) - base for d in differences], 1)
+    inverse, _ = covariance(J, 1.0)
+    shift = -inverse @ (np.asarray(J).T @ moves)
+    return shift @ shift.T / len(differences)
 
 
 NO_EXPOSURE = ("the photo's exposure is unknown, and a photo's brightness is gain x R_d: give a reference (a photo "
@@ -647,8 +726,10 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     noise : "estimate" or float
         ``"estimate"`` (default): from the photo itself (:func:`estimate_noise`, read + shot noise
         fitted to the differences of adjacent residuals of a first fit, which is then solved again
-        with it). A number: the relative noise of a pixel, that times the pixel value, floored at
-        1 % of the channel's 99th percentile times it (dark pixels). A noise set too low is what
+        with it; the first fit's noise is read off the photo alone, :func:`provisional_noise`). A
+        number: the relative noise of a pixel, that times the pixel's local level (the photo
+        averaged over its neighbours, not the pixel's own noisy value), floored at 1 % of the
+        channel's 99th percentile times it (dark pixels). A noise set too low is what
         made a path-traced photo's fit report chi2/dof 510 and errors that missed the truth.
     loss : {"huber", "squared"}
         ``"huber"`` (default): Huber's loss on the whitened residuals (quadratic within 1.345
@@ -719,7 +800,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         :data:`MODEL_ERROR`, 1.5 %: its default frames against a path tracer), propagated into
         the errors beside the photo's noise (:func:`_model_error_covariance`): with a reference's
         gain a channel drawn 1.5 % dark is fitted about 1.5 % bright in R_d, whatever the photo's
-        noise. 0 for a photo this renderer made itself (the errors are then the noise's alone).
+        noise. Where the fit re-planned, the plan's own error too, as the last re-plan showed it
+        (:func:`_plan_error_covariance`). 0 for a photo this renderer made itself (the errors are
+        then the noise's alone).
     max_steps, replans, unconstrained
         Solver steps per round; re-plans of the variances; the relative standard error above
         which a parameter is reported as not constrained by the image.
@@ -774,10 +857,8 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     if use.sum() * 3 < 10 * n_params:
         raise RenderFitError(f"photo: only {int(use.sum())} pixels of the object can be fitted (needs at least "
                              f"{int(np.ceil(10 * n_params / 3))}); is the camera looking at the object?")
-    if sigma is None:  # a first, provisional noise of 5 % where it is estimated
-        relative = 0.05 if estimate else float(noise)
-        floor = 0.01 * np.percentile(np.abs(photo[use]), 99, axis=0)
-        sigma = relative * np.maximum(np.abs(photo), np.maximum(floor, 1e-300))
+    if sigma is None:  # where it is estimated, a first, provisional noise read off the photo alone
+        sigma = provisional_noise(photo, use, None if estimate else float(noise))
     sigma = np.broadcast_to(np.asarray(sigma, float), photo.shape)
     if not (np.isfinite(sigma[use]).all() and (sigma[use] > 0).all()):
         raise RenderFitError("sigma: every fitted pixel's standard error must be finite and > 0.")
@@ -876,6 +957,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         medium = _medium(theta, eta)
         return render(medium, data, jnp.exp(theta[-1])) if fit_roughness else render(medium, data)
 
+    before, plan_differences = None, []  # the estimate's frame before a re-plan; the re-plans' changes to it
     for round_ in range(replans + 1):
         if round_ > 0:
             say(f"round {round_ + 1}: {plan.method}: the passes that stay fixed during the fit")
@@ -885,6 +967,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
                 held = _specular_image(parts, roughness)
         if fit_roughness:
             render, data = _with_highlight(render), (data, parts, held)
+        if before is not None:  # the same estimate under the new plan and the old: the plan's own error
+            plan_differences.append(np.asarray(draw(theta)) - before)
+            before = None
         if fit_gain and not prior and round_ == 0:  # the best gain for the start: linear least squares
             model = np.asarray(draw(theta))
             w2 = np.asarray(inverse_sigma) ** 2
@@ -918,10 +1003,13 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
             # The fixed passes hold the irradiance scaled by the round's own laws; a move below
             # LAW_REPLAN changes every pixel by less than that. At 1 % (a round of blurs fewer;
             # the test suite's fits were 1.5-3x faster) a held law biased the gain fit by 4 errors.
-            if plan.on(Pass.OBLIQUE_INCIDENCE) and (moved := _incidence_moved(fit_scene, next_scene)) > LAW_REPLAN:
+            # The frame follows the irradiance's laws itself, read at each pixel, except under
+            # translucent shadow maps (jsss.render.linear_frame): a move re-plans past LAW_FOLLOWED.
+            laws = LAW_FOLLOWED if _follows_laws(data) else LAW_REPLAN
+            if plan.on(Pass.OBLIQUE_INCIDENCE) and (moved := _incidence_moved(fit_scene, next_scene)) > laws:
                 changed.append(f"oblique-incidence law (moved by up to {100 * moved:.2f} %)")
             if plan.on(Pass.DEPOSIT_DEPTH) and (moved := abs(deposit_change(next_scene)[0]
-                                                          - deposit_change(fit_scene)[0])) > LAW_REPLAN:
+                                                          - deposit_change(fit_scene)[0])) > laws:
                 changed.append(f"deposit depth (irradiance under the lamp moved by {100 * moved:.2f} %)")
             if plan.on(Pass.LAST_LEG) and (moved := abs(last_leg_change(next_scene)[0]
                                                      - last_leg_change(fit_scene)[0])) > LAW_REPLAN:
@@ -938,6 +1026,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
             break
         history.append(f"re-planned for the estimate after round {round_ + 1}: " + ", ".join(changed))
         say(history[-1])
+        before = np.asarray(draw(theta))
         fit_scene, plan = next_scene, next_plan
     if estimate:  # the noise from the first fit's residuals, then the fit again with it
         gain_now = float(np.exp(theta[6])) if fit_gain else held_gain
@@ -981,8 +1070,16 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     if model_error > 0:  # the renderer's own error: a share of the light no photo's noise shows
         specular_part = (_specular_image(parts, jnp.exp(theta[-1])) if fit_roughness
                          else held if highlight in ("mask", "model") else jnp.zeros_like(image))
-        slopes = _scale_slopes(theta, args, image, specular_part, fit_gain, block, robust, prior)
+        slopes = _model_error_slopes(theta, args, image, specular_part, fit_gain, block, robust, prior)
         cov = cov + _model_error_covariance(J, slopes, float(model_error))
+        if plan_differences:  # and the plan's, where the last re-plan showed it (the first plan's was the start's)
+            last = plan_differences[-1:]
+            cov = cov + _plan_error_covariance(J, theta, args, image, last, fit_gain, block, robust, prior)
+            drawn = np.asarray(image)
+            seen = use[..., None] & (drawn > 0)
+            change = float(np.sqrt(np.mean((last[0][seen] / drawn[seen]) ** 2)))
+            history.append(f"the errors include the plan's own: the last re-plan moved the estimate's frame by "
+                           f"{100 * change:.2g} % RMS per pixel")
     image = np.asarray(image)
     theta_np = np.asarray(theta)
     rel = standard_errors(np.eye(len(theta_np)), cov, null)  # errors of logarithms = relative errors

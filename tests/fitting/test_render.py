@@ -255,3 +255,30 @@ def test_the_fits_medium_is_held_in_its_range_and_flat_beyond_it():
     assert J[0, 0] == pytest.approx(1.0) and J[5, 5] == pytest.approx(1.0)  # the others still move
     artist = np.asarray(_artist(beyond, "transport", 0.0, eta))
     assert np.all(np.isfinite(artist)) and np.all(np.isfinite(np.asarray(jax.jacfwd(_artist)(beyond, "transport", 0.0, eta))))
+
+
+def test_the_plans_own_error_propagates_as_the_renderers_does():
+    """The plan's error term (a re-plan's change to the estimate's frame, propagated through the
+    fit's linearised solution) and the renderer's (a channel's light scaled by 1 + epsilon) are
+    one formula: a re-plan that scaled channel c by exp(epsilon) gives the covariance the model
+    error epsilon in channel c gives, to (e^epsilon - 1)^2 / epsilon^2 (plain squares: the
+    whitened residuals are linear in the frame). Closed form; random Jacobian and frame."""
+    from fitting.render import _model_error_covariance, _model_error_slopes, _plan_error_covariance
+
+    rng = np.random.default_rng(5)
+    image = jnp.asarray(rng.uniform(0.5, 1.5, (6, 8, 3)))
+    photo = image * (1 + 0.01 * rng.standard_normal(image.shape))
+    args = (None, photo, jnp.ones((6, 8, 1)), 1 / (0.01 * photo), None, (2.0, 0.0, 0.0))
+    theta = jnp.zeros(6)
+    J = rng.standard_normal((6 * 8 * 3, 6))
+    slopes = _model_error_slopes(theta, args, image, jnp.zeros_like(image), False, 1, False, False)
+    epsilon = 1e-3
+    for c in range(3):
+        scaled = np.zeros(3)
+        scaled[c] = epsilon
+        difference = np.asarray(image) * (np.exp(scaled) - 1)
+        plan = _plan_error_covariance(J, theta, args, image, [difference], False, 1, False, False)
+        model = _model_error_covariance(J, slopes[:, c:c + 1], epsilon)
+        np.testing.assert_allclose(plan, model * ((np.exp(epsilon) - 1) / epsilon) ** 2, rtol=1e-9,
+                                   atol=1e-12 * np.abs(model).max())
+        assert np.abs(model).max() > 0
