@@ -35,8 +35,8 @@ What the image constrains is reported, not assumed (:mod:`fitting.statistics`): 
 model that cannot fit the photo (chi^2 per degree of freedom above 1) widens its errors
 rather than claiming noise-level precision, plus the covariance of the renderer's own error
 (``model_error``, a relative error in each channel's light that no photo's noise shows, and the
-plan's own where the fit re-planned, propagated through the same linearised solution), and a warning for each parameter whose relative
-standard error exceeds ``unconstrained`` (e.g. the mean free path of a uniformly lit object,
+plan's own where the fit re-planned, propagated through the same linearised solution), and a
+warning for each parameter whose relative standard error exceeds ``unconstrained`` (e.g. the mean free path of a uniformly lit object,
 or any spread under Lambert, which has none). The artist's parameters -- the total diffuse
 reflectance :math:`R_d` (the profile model's, per unit entering flux at normal incidence) and
 the mean free path :math:`1/\sigma_t'` -- are derived with their errors by the delta method.
@@ -465,6 +465,7 @@ GAIN_PINNED = 0.05
 # noise alone were 0.4 % and R_d came out +1.2 to +1.7 % (z up to 4.6).
 MODEL_ERROR = 0.015
 
+
 def _model_error_covariance(J, slopes, model_error):
     r"""The parameters' covariance from the renderer's error in each channel's subsurface light.
 
@@ -505,9 +506,9 @@ def _plan_error_covariance(J, theta, args, image, differences, fit_gain, block, 
     solution by :math:`-(J^T J)^{-1} J^T d_j`, with :math:`d_j` the whitened residuals' change;
     the covariance is the mean of those shifts' outer products: the estimate's own plan may be as
     wrong as two plans disagree. Only the last re-plan is passed: the first plan was made for the
-    start, which may be far from any estimate. On the ketchup plane through its dielectric, plans that each
-    claimed 0.1 % raised the chi^2 at one estimate by 60-260 (of 34500) and sent the red mean free
-    path from 5.6 to 10 mm over three rounds, while its stated error was 3-8 %."""
+    start, which may be far from any estimate. On the ketchup plane through its dielectric, plans
+    that each claimed 0.1 % raised the chi^2 at one estimate by 60-260 (of 34500) and sent the red
+    mean free path from 5.6 to 10 mm over three rounds, while its stated error was 3-8 %."""
     _, photo, mask, inverse_sigma, _, exposure = args
     gain = jnp.exp(theta[6]) if fit_gain else exposure[0]
 

@@ -38,10 +38,15 @@ move. The irradiance's oblique-incidence law and the depth at which point lights
 the pixel: the diffusion light is scaled by :math:`\rho(x) = \sum_l E_l(x) f_l(x; m) / \sum_l E_l(x)
 f_l(x; m_0)`, each light's transmitted irradiance :math:`E_l` at the pixel times its laws at the
 medium :math:`m` over those at the plan's :math:`m_0`. Exact where the laws' factor is uniform
-over the profile's reach (a directional light on a plane); where it varies (a point light's
-foot) the error is that variation across the profile, second order in the move. An
-environment's share, and single scattering's deposit depth, stay held. The exit law (:mod:`jsss.diffusion.exit_law`) depends on the albedo alone and
-follows it: :meth:`LinearFrame.radiance` recomputes the lobe from it.
+over the profile's reach (a directional light on a plane; tested to 1e-10); where it varies (a
+point light's foot) the error is that variation across the profile. Against render() of the
+moved medium on the same plan (legs held on both sides): the ketchup plane at 160 x 120 from
+its medium to a fit's (red mean free path 4.1 -> 6.4 mm), relative RMS per pixel 1.9 % held,
+0.08 % followed; to 11.8 mm, 6.9 % and 0.49 %; marble with sigma_a x 1.5 and sigma_s' x 0.7,
+0.41 % and 0.13 %. An environment's share, single scattering's deposit depth, and every law
+under translucent shadow maps (their light entered on the far side) stay held. The exit law
+(:mod:`jsss.diffusion.exit_law`) depends on the albedo alone and follows it:
+:meth:`LinearFrame.radiance` recomputes the lobe from it.
 """
 
 from __future__ import annotations
