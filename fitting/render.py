@@ -388,9 +388,9 @@ def _local_level(photo, use, pixels: float = 1.0) -> np.ndarray:
     standard deviation, the pixel itself left out (its own noise would make a level it is
     weighted by lean its way: -1.3 % in a 20 %-noise fit with it in) and the background too
     (normalised convolution at the object's outline)."""
-    impulse = np.zeros((9, 9))
-    impulse[4, 4] = 1.0
-    own = ndimage.gaussian_filter(impulse, pixels)[4, 4]  # the kernel's weight on the pixel itself
+    impulse = np.zeros(2 * int(4 * pixels + 0.5) + 1)  # the filter's own reach (truncate=4)
+    impulse[impulse.size // 2] = 1.0
+    own = ndimage.gaussian_filter1d(impulse, pixels)[impulse.size // 2] ** 2  # its weight on the pixel itself
     weight = use.astype(float)
     values = np.where(use[..., None], photo, 0.0)
     summed = ndimage.gaussian_filter(values, (pixels, pixels, 0)) - own * values
@@ -413,7 +413,7 @@ def provisional_noise(photo, use, relative: float | None = None) -> np.ndarray:
     renderer's own error). Fewer than 200 adjacent fitted pixels (too few to estimate): 5 % of
     the level.
     """
-    level = np.maximum(np.abs(_local_level(photo, use)), 0.0)
+    level = np.abs(_local_level(photo, use))
     floor = np.maximum(0.01 * np.percentile(level[use], 99, axis=0), 1e-300)
     level = np.maximum(level, floor)  # dark pixels: 1 % of the channel's bright end
     if relative is not None:
@@ -478,9 +478,16 @@ def _model_error_covariance(J, slopes, model_error):
     gain fitted and nothing else to tell them apart, the shift goes into the gain; with a
     reference's gain (its prior), into R_d and sigma_a.
     """
-    inverse, _ = covariance(J, 1.0)  # on the directions the photo sees; the others are infinite already
-    shift = -inverse @ (np.asarray(J).T @ np.asarray(slopes))
-    return model_error**2 * shift @ shift.T
+    return model_error**2 * _shifts_covariance(J, slopes)
+
+
+def _shifts_covariance(J, moves):
+    r"""Sum of :math:`\delta\theta_j \delta\theta_j^T` over the columns ``moves`` (m, k) of changes
+    to the whitened residuals, :math:`\delta\theta_j = -(J^T J)^{-1} J^T d_j`: the linearised
+    solution's shifts, on the directions the photo sees (the others are infinite already)."""
+    inverse, _ = covariance(J, 1.0)
+    shift = -inverse @ (np.asarray(J).T @ np.asarray(moves))
+    return shift @ shift.T
 
 
 def _model_error_slopes(theta, args, image, specular, fit_gain, block, robust, prior):
@@ -499,14 +506,14 @@ def _model_error_slopes(theta, args, image, specular, fit_gain, block, robust, p
     return np.asarray(jax.jacfwd(residuals)(jnp.zeros(3, image.dtype)))
 
 
-def _plan_error_covariance(J, theta, args, image, differences, fit_gain, block, robust, prior):
-    r"""The parameters' covariance from the plan's own error, observed: each of ``differences``
-    (H, W, C) is the estimate's frame under a re-plan less its frame under the plan before, two
-    plans that each claim the fit's accuracy. As :func:`_model_error_covariance`, each moves the
-    solution by :math:`-(J^T J)^{-1} J^T d_j`, with :math:`d_j` the whitened residuals' change;
-    the covariance is the mean of those shifts' outer products: the estimate's own plan may be as
-    wrong as two plans disagree. Only the last re-plan is passed: the first plan was made for the
-    start, which may be far from any estimate. On the ketchup plane through its dielectric, plans
+def _plan_error_covariance(J, theta, args, image, difference, fit_gain, block, robust, prior):
+    r"""The parameters' covariance from the plan's own error, observed: ``difference`` (H, W, C)
+    is the estimate's frame under the last re-plan less its frame under the plan before, two
+    plans that each claim the fit's accuracy (not the first re-plan's: that plan was the start's,
+    which may be far from any estimate). As :func:`_model_error_covariance`, it moves the
+    solution by :math:`-(J^T J)^{-1} J^T d`, with :math:`d` the whitened residuals' change, whose
+    outer product is the covariance: the estimate's own plan may be as wrong as two plans
+    disagree. On the ketchup plane through its dielectric, plans
     that each claimed 0.1 % raised the chi^2 at one estimate by 60-260 (of 34500) and sent the red
     mean free path from 5.6 to 10 mm over three rounds, while its stated error was 3-8 %."""
     _, photo, mask, inverse_sigma, _, exposure = args
@@ -516,11 +523,7 @@ def _plan_error_covariance(J, theta, args, image, differences, fit_gain, block, 
         pixels = _pixel_residuals(gain * model, photo, mask, inverse_sigma, block, robust)
         return np.concatenate([np.asarray(pixels), np.zeros(int(prior))])  # the reference's row does not move
 
-    base = whitened(image)
-    moves = np.stack([whitened(image + jnp.asarray(d, image.dtype)) - base for d in differences], 1)
-    inverse, _ = covariance(J, 1.0)
-    shift = -inverse @ (np.asarray(J).T @ moves)
-    return shift @ shift.T / len(differences)
+    return _shifts_covariance(J, (whitened(image + jnp.asarray(difference, image.dtype)) - whitened(image))[:, None])
 
 
 NO_EXPOSURE = ("the photo's exposure is unknown, and a photo's brightness is gain x R_d: give a reference (a photo "
@@ -958,7 +961,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         medium = _medium(theta, eta)
         return render(medium, data, jnp.exp(theta[-1])) if fit_roughness else render(medium, data)
 
-    before, plan_differences = None, []  # the estimate's frame before a re-plan; the re-plans' changes to it
+    before = plan_difference = None  # the estimate's frame before a re-plan; the last re-plan's change to it
     for round_ in range(replans + 1):
         if round_ > 0:
             say(f"round {round_ + 1}: {plan.method}: the passes that stay fixed during the fit")
@@ -969,7 +972,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         if fit_roughness:
             render, data = _with_highlight(render), (data, parts, held)
         if before is not None:  # the same estimate under the new plan and the old: the plan's own error
-            plan_differences.append(np.asarray(draw(theta)) - before)
+            plan_difference = np.asarray(draw(theta)) - before
             before = None
         if fit_gain and not prior and round_ == 0:  # the best gain for the start: linear least squares
             model = np.asarray(draw(theta))
@@ -1073,12 +1076,11 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
                          else held if highlight in ("mask", "model") else jnp.zeros_like(image))
         slopes = _model_error_slopes(theta, args, image, specular_part, fit_gain, block, robust, prior)
         cov = cov + _model_error_covariance(J, slopes, float(model_error))
-        if plan_differences:  # and the plan's, where the last re-plan showed it (the first plan's was the start's)
-            last = plan_differences[-1:]
-            cov = cov + _plan_error_covariance(J, theta, args, image, last, fit_gain, block, robust, prior)
+        if plan_difference is not None:  # and the plan's, where the last re-plan showed it
+            cov = cov + _plan_error_covariance(J, theta, args, image, plan_difference, fit_gain, block, robust, prior)
             drawn = np.asarray(image)
             seen = use[..., None] & (drawn > 0)
-            change = float(np.sqrt(np.mean((last[0][seen] / drawn[seen]) ** 2)))
+            change = float(np.sqrt(np.mean((plan_difference[seen] / drawn[seen]) ** 2)))
             history.append(f"the errors include the plan's own: the last re-plan moved the estimate's frame by "
                            f"{100 * change:.2g} % RMS per pixel")
     image = np.asarray(image)

@@ -97,7 +97,8 @@ class LinearFrame(eqx.Module):
         irradiance at the pixel without the laws; None when the plan runs neither law
     law_cosine, law_distance : (L, H, W) or None, each light's incidence cosine and distance [mm]
         (infinite for a directional light) at the pixel
-    law_held : (L, H, W, C) or None, the laws' factor at the plan's medium
+    law_held : (H, W, C) or None [W/mm^2], the pixel's transmitted irradiance with the laws at
+        the plan's medium, every light's and an environment's (the ratio's denominator)
     law_rest : (H, W, C) or None [W/mm^2], an environment's share (its laws held)
     oblique, deposit : whether the plan runs the oblique-incidence law and the deposit depth
     """
@@ -129,15 +130,12 @@ class LinearFrame(eqx.Module):
         factor = jnp.ones(self.law_light.shape, self.basis.dtype)
         if self.oblique:
             factor = factor * incidence_law(medium)(self.law_cosine)
-        if self.deposit:
-            depth = deposit_depth(medium)
-            for i in range(self.law_light.shape[0]):  # depth_falloff reads distance and cosine
-                geometry = _Geometry(self.law_cosine[i], self.law_distance[i])
-                factor = factor.at[i].multiply(depth_falloff(geometry, depth, self.basis.dtype))
+        if self.deposit:  # every light at once: (L, H, W) geometry, (C,) depth
+            geometry = _Geometry(self.law_cosine, self.law_distance)
+            factor = factor * depth_falloff(geometry, deposit_depth(medium), self.basis.dtype)
         now = (self.law_light * factor).sum(0) + self.law_rest
-        held = (self.law_light * self.law_held).sum(0) + self.law_rest
-        lit = held > 0
-        return jnp.where(lit, now / jnp.where(lit, held, 1.0), 1.0)  # double where: unlit pixels stay 1
+        lit = self.law_held > 0
+        return jnp.where(lit, now / jnp.where(lit, self.law_held, 1.0), 1.0)  # double where: unlit pixels stay 1
 
     def radiance(self, weights, albedo=None, medium=None):
         r"""Linear radiance (H, W, C) for Gaussian ``weights`` (n, C) on :attr:`variances` and the
@@ -244,24 +242,23 @@ class _Geometry(NamedTuple):
 
 def _law_parts(params, lights, dtype) -> dict:
     """:class:`LinearFrame`'s ``law_*`` fields: each point or directional light at the pixels, its
-    irradiance without the laws and the laws' factor at the plan's medium; an environment apart."""
+    irradiance without the laws, and the pixel's irradiance with them at the plan's medium."""
     radiant = params.radiant.astype(dtype)
     rest = jnp.zeros(tuple(np.shape(lights[0].cosine)) + (radiant.shape[-1],), dtype)
-    light, held, cosine, distance = [], [], [], []
+    light, cosine, distance = [], [], []
+    held = jnp.zeros_like(rest)  # every light's with the plan's laws
     for i, g in enumerate(lights):
         if isinstance(g, EnvironmentGeometry):
             rest = rest + irradiance([g], radiant[i:i + 1], params.eta, medium=params.oblique)
             continue
         g = g.astype(dtype)
-        bare = irradiance([g], radiant[i:i + 1], params.eta)
-        lawful = irradiance([g], radiant[i:i + 1], params.eta, medium=params.oblique, deposit=params.deposit)
-        light.append(bare)
-        held.append(jnp.where(bare > 0, lawful / jnp.where(bare > 0, bare, 1.0), 1.0))
+        light.append(irradiance([g], radiant[i:i + 1], params.eta))
+        held = held + irradiance([g], radiant[i:i + 1], params.eta, medium=params.oblique, deposit=params.deposit)
         cosine.append(jnp.clip(g.cosine, 0.0, 1.0))
         distance.append(jnp.broadcast_to(jnp.asarray(g.distance, dtype), g.cosine.shape))
     if not light:
         return {}
     return {"law_light": jnp.stack(light), "law_cosine": jnp.stack(cosine), "law_distance": jnp.stack(distance),
-            "law_held": jnp.stack(held), "law_rest": rest, "oblique": params.oblique is not None,
+            "law_held": held + rest, "law_rest": rest, "oblique": params.oblique is not None,
             "deposit": params.deposit is not None}
 

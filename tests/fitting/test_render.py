@@ -277,7 +277,7 @@ def test_the_plans_own_error_propagates_as_the_renderers_does():
         scaled = np.zeros(3)
         scaled[c] = epsilon
         difference = np.asarray(image) * (np.exp(scaled) - 1)
-        plan = _plan_error_covariance(J, theta, args, image, [difference], False, 1, False, False)
+        plan = _plan_error_covariance(J, theta, args, image, difference, False, 1, False, False)
         model = _model_error_covariance(J, slopes[:, c:c + 1], epsilon)
         np.testing.assert_allclose(plan, model * ((np.exp(epsilon) - 1) / epsilon) ** 2, rtol=1e-9,
                                    atol=1e-12 * np.abs(model).max())
