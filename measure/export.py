@@ -44,6 +44,25 @@ tables): Mitsuba within 0.5 %, Cycles within 0.2 % in all nine channels.
   it drops the profile's shape (Cycles' albedo is not the medium's: light spreads
   differently, and thin parts and edges differ) and g beyond Cycles' own walk (with
   g = 0.8 the total is within 2 % except skin's red, 3.5 % bright).
+
+Colour maps
+-----------
+A fitted colour map c (``jsss-render fit --albedo-map``: pre-post texturing, d'Eon et al.
+2007 sec. 5.3, M(x) = sqrt(c(x)) int R sqrt(c(y)) E(y) dA_y, c relative to the medium) goes
+to each renderer as a texture beside the homogeneous medium, in the map file's layout (its
+bottom row is v = 0, OBJ's convention, which Mitsuba's OBJ loader and Blender's image
+textures follow; :func:`jsss.render.surface_maps.read_map`):
+
+- Mitsuba 3: the ``dielectric``'s ``specular_transmittance`` is sqrt(c)
+  (:func:`prepost_transmittance`). Each crossing of the boundary, in or out, multiplies the
+  path by the texture at that point, and reflection (outside or inside) keeps its weight:
+  exactly pre-post's sqrt(c) in and sqrt(c) out, the medium's internal reflection untouched.
+  Values above 1 (the map brighter than the medium) are multiplied as they are.
+- Blender Cycles: an Image Texture into Base Color, per texel the colour whose walk returns
+  c R_d (:func:`blender_colour_map`). Cycles reads the colour where the camera path enters,
+  the point the camera sees: post-scatter texturing, so the map's edges stay sharper than
+  jsss's pre-post blur of them.
+- pbrt-v4: none (its ``subsurface`` material is written with constant coefficients).
 """
 
 from __future__ import annotations
@@ -54,8 +73,9 @@ import numpy as np
 
 from . import cycles_walk
 
-__all__ = ["blender_principled", "blender_python", "cycles_albedo_from_colour", "cycles_colour_from_albedo",
-           "mitsuba_dict", "mitsuba_xml", "pbrt_material", "scattering_coefficients"]
+__all__ = ["blender_colour_map", "blender_principled", "blender_python", "cycles_albedo_from_colour",
+           "cycles_colour_from_albedo", "mitsuba_dict", "mitsuba_xml", "pbrt_material", "prepost_transmittance",
+           "scattering_coefficients"]
 
 
 def scattering_coefficients(medium, *, g=0.0, unit_mm=1.0):
@@ -105,13 +125,16 @@ def _fmt(values) -> str:
 
 
 # ----------------------------------------------------------------------------- Mitsuba 3
-def mitsuba_dict(medium, *, g=0.0, unit_mm=1.0):
+def mitsuba_dict(medium, *, g=0.0, unit_mm=1.0, transmittance=None):
     """The material as Mitsuba 3 scene-dict entries: ``{"bsdf": ..., "interior": ...}``.
 
     Put both on a closed shape: ``{"type": "ply", ..., "bsdf": d["bsdf"], "interior": d["interior"]}``.
     The medium is ``homogeneous`` with ``sigma_t = sigma_a + sigma_s`` (as ``scale`` times an
     RGB of at most 1), ``albedo = sigma_s / sigma_t`` and a Henyey-Greenstein phase function;
-    the boundary a smooth ``dielectric`` of the medium's eta against air.
+    the boundary a smooth ``dielectric`` of the medium's eta against air. ``transmittance``, the
+    name of an image of :func:`prepost_transmittance` (a colour map's sqrt), becomes the
+    dielectric's ``specular_transmittance`` (``bitmap``, raw values, bilinear, clamped at the
+    border as jsss's maps are; see the module's "Colour maps").
     """
     sigma_a, sigma_s, eta = scattering_coefficients(medium, g=g, unit_mm=unit_mm)
     sigma_t = np.asarray(_rgb(sigma_a + sigma_s))
@@ -123,10 +146,29 @@ def mitsuba_dict(medium, *, g=0.0, unit_mm=1.0):
                 "albedo": {"type": "rgb", "value": albedo.tolist()}, "scale": scale,
                 "phase": {"type": "hg", "g": float(g)}}
     bsdf = {"type": "dielectric", "int_ior": eta, "ext_ior": 1.0}
+    if transmittance is not None:
+        bsdf["specular_transmittance"] = {"type": "bitmap", "filename": str(transmittance), "raw": True,
+                                          "filter_type": "bilinear", "wrap_mode": "clamp"}
     return {"bsdf": bsdf, "interior": interior}
 
 
-def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True):
+def prepost_transmittance(albedo_map):
+    r"""The Mitsuba texture of a pre-post colour map: :math:`t = \sqrt{c}` per texel and channel.
+
+    A path that enters at y and leaves at x through a ``dielectric`` whose
+    ``specular_transmittance`` is t carries :math:`t(y)\,t(x) = \sqrt{c(y)}\sqrt{c(x)}`, the
+    pre-post map's weight. ``albedo_map``: (rows, columns, 3), finite and >= 0 (``ValueError``
+    otherwise); the result has its layout (write it as the map file is written).
+    """
+    albedo_map = np.asarray(albedo_map, float)
+    if albedo_map.ndim != 3 or albedo_map.shape[-1] != 3:
+        raise ValueError(f"a colour map is (rows, columns, 3); got shape {albedo_map.shape}")
+    if not np.all(np.isfinite(albedo_map) & (albedo_map >= 0)):
+        raise ValueError("a colour map's values must be finite and >= 0")
+    return np.sqrt(albedo_map)
+
+
+def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True, transmittance=None):
     """The material as Mitsuba 3 XML: a ``dielectric`` BSDF and a ``homogeneous`` medium.
 
     With ``preview`` (default) the file is a whole scene that ``mitsuba file.xml`` renders: a
@@ -134,13 +176,36 @@ def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True):
     environment of radiance 1), seen by a 64 x 64 camera, integrator ``volpathmis``. Without
     it, only the two declarations to paste into a scene; a shape uses them with
     ``<ref id="NAME_bsdf"/>`` and ``<ref name="interior" id="NAME_medium"/>``.
+
+    ``transmittance``: the file name (relative to the XML, as Mitsuba resolves it) of a colour
+    map's :func:`prepost_transmittance`, written in the map file's layout (bottom row v = 0);
+    the dielectric's ``specular_transmittance``. It lies right on an OBJ mesh with UVs (Mitsuba's
+    OBJ loader flips v to that layout). Mitsuba's built-in sphere puts v = 0 (its +z pole, as
+    jsss's sphere does) on the image's top row, so the preview's texture flips v (``to_uv``);
+    the declarations alone do not.
     """
     d = mitsuba_dict(medium, g=g, unit_mm=unit_mm)
     m, b = d["interior"], d["bsdf"]
+
+    def texture(flip_v):
+        if transmittance is None:
+            return ""
+        flip = ('            <transform name="to_uv">\n'
+                '                <scale x="1" y="-1"/>\n'
+                '                <translate x="0" y="1"/>\n'
+                '            </transform>\n') if flip_v else ""
+        return ('        <texture type="bitmap" name="specular_transmittance">\n'
+                f'            <string name="filename" value="{_xml_attribute(transmittance)}"/>\n'
+                '            <boolean name="raw" value="true"/>\n'
+                '            <string name="filter_type" value="bilinear"/>\n'
+                '            <string name="wrap_mode" value="clamp"/>\n'
+                + flip + '        </texture>\n')
+
     declarations = (
         f'    <bsdf type="dielectric" id="{name}_bsdf">\n'
         f'        <float name="int_ior" value="{b["int_ior"]:.9g}"/>\n'
         f'        <float name="ext_ior" value="1"/>\n'
+        + texture(flip_v=preview) +
         f'    </bsdf>\n'
         f'    <medium type="homogeneous" id="{name}_medium">\n'
         f'        <rgb name="sigma_t" value="{", ".join(f"{v:.9g}" for v in m["sigma_t"]["value"])}"/>\n'
@@ -152,6 +217,10 @@ def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True):
         f'    </medium>\n')
     header = (f"<!-- jsss: sigma_a, sigma_s in 1/(scene unit), scene unit = {float(unit_mm):g} mm; "
               f"sigma_s = sigma_s' / (1 - g), g = {float(g):g} -->\n")
+    if transmittance is not None:
+        header += ("<!-- jsss: a pre-post colour map c: the dielectric's specular_transmittance is sqrt(c) in the map "
+                   "file's layout (OBJ's: bottom row v = 0). The preview's sphere flips v (to_uv); an OBJ mesh "
+                   "needs no flip. -->\n")
     if not preview:
         return header + '<scene version="3.0.0">\n' + declarations + "</scene>\n"
     radius = 20.0 / float(unit_mm)
@@ -181,6 +250,13 @@ def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True):
         '        </film>\n'
         '    </sensor>\n'
         '</scene>\n')
+
+
+def _xml_attribute(text) -> str:
+    """``text`` safe inside a double-quoted XML attribute."""
+    from xml.sax.saxutils import escape
+
+    return escape(str(text), {'"': "&quot;"})
 
 
 # ----------------------------------------------------------------------------- pbrt-v4
@@ -300,11 +376,35 @@ def _total_reflectance(medium, g, eta):
     return np.where(clear, total * reduced / floor, total)
 
 
-def blender_python(medium, *, g=0.0, unit_mm=1.0, name="jsss"):
+def blender_colour_map(medium, albedo_map, *, g=0.0):
+    r"""Cycles' Base Color per texel of a pre-post colour map ``albedo_map`` (rows, columns, 3).
+
+    Each texel's colour is the one whose walk returns :math:`c\,R_d`, the medium's total
+    reflectance (:func:`blender_principled`) times the map, so a thick piece painted with the
+    map is as bright in Cycles, texel by texel, as jsss renders it far from the map's edges.
+    Cycles reads the colour where the camera sees the surface (post-scatter texturing), not
+    sqrt(c) at both ends. A total beyond Cycles' walk is clamped with a warning. The result
+    has the map's layout.
+    """
+    albedo_map = prepost_transmittance(albedo_map) ** 2  # the same checks
+    _, _, eta = scattering_coefficients(medium, g=g)
+    target = albedo_map * _total_reflectance(medium, float(g), eta)
+    alpha, reachable = cycles_walk.albedo_for_reflectance(target, g)
+    if not np.all(reachable):
+        warnings.warn(f"{np.count_nonzero(~reachable)} texel channels of the map ask for a total reflectance above "
+                      f"the {cycles_walk.walk_reflectance(1.0, g):.4f} that Cycles' walk returns at its largest "
+                      "albedo; their colour is clamped there (darker)", stacklevel=2)
+    return cycles_colour_from_albedo(alpha, g)
+
+
+def blender_python(medium, *, g=0.0, unit_mm=1.0, name="jsss", colour_map=None):
     """A Python script for Blender (4.x) that creates material NAME with :func:`blender_principled`'s inputs.
 
     Run it in Blender's text editor or ``blender --python FILE``; it assigns the material to
-    the active object when there is one.
+    the active object when there is one. ``colour_map``: the file name, beside the script, of
+    an image of :func:`blender_colour_map` (in the map file's layout, which Blender's image
+    textures share); it goes into Base Color through an Image Texture node (linear,
+    non-colour data, bilinear, clamped at the border) on the object's active UV map.
     """
     p = blender_principled(medium, g=g, unit_mm=unit_mm)
     rd = ", ".join(f"{v:.4f}" for v in p["total_reflectance"])
@@ -328,5 +428,20 @@ def blender_python(medium, *, g=0.0, unit_mm=1.0, name="jsss"):
             f"node.inputs['Subsurface Anisotropy'].default_value = {p['subsurface_anisotropy']:.9g}\n"
             f"node.inputs['IOR'].default_value = {p['ior']:.9g}\n"
             "node.inputs['Roughness'].default_value = 0.0  # the smooth surface the colour was chosen for\n"
+            + ("" if colour_map is None else _blender_texture(colour_map)) +
             "if bpy.context.active_object is not None:\n"
             "    bpy.context.active_object.active_material = material\n")
+
+
+def _blender_texture(colour_map) -> str:
+    """The script's lines that read ``colour_map`` (beside the script) into Base Color."""
+    return ("# The colour map: per texel the Base Color whose walk returns c R_d (c: the fitted map). Cycles\n"
+            "# reads it where the camera sees the surface (post-scatter), not sqrt(c) at both ends (jsss).\n"
+            "import os\n"
+            "folder = os.path.dirname(os.path.abspath(__file__)) if '__file__' in globals() else os.getcwd()\n"
+            f"texture = material.node_tree.nodes.new('ShaderNodeTexImage')\n"
+            f"texture.image = bpy.data.images.load(os.path.join(folder, {str(colour_map)!r}))\n"
+            "texture.image.colorspace_settings.name = 'Non-Color'  # linear values, used as they are\n"
+            "texture.interpolation = 'Linear'\n"
+            "texture.extension = 'EXTEND'  # clamped at the border, as jsss's maps are\n"
+            "material.node_tree.links.new(texture.outputs['Color'], node.inputs['Base Color'])\n")

@@ -12,7 +12,11 @@ resolves the exposure); this one checks what the map fit cannot take, runs
   ``[material.maps] albedo`` naming the map, which ``jsss-render`` renders as it is;
 * ``PHOTO.fit.json``: the mean free path and medium with errors, the map's counts and error
   quantiles, chi^2/dof, warnings and history;
-* ``PHOTO.fit.png``: photo, fit and whitened residual.
+* ``PHOTO.fit.png``: photo, fit and whitened residual;
+* with ``--export mitsuba`` / ``blender``: the material for that renderer with the map as its
+  texture (``PHOTO.fit_mitsuba.xml`` and ``PHOTO.fit_mitsuba_transmittance.exr``,
+  ``PHOTO.fit_blender.py`` and ``PHOTO.fit_blender_colour.exr``; :mod:`measure.export`'s
+  "Colour maps"), when the fit converged.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import numpy as np
 import tomlkit
 
 from ._console import UsageError, json_safe, write_fit_files
+from ._scene_files import MAP_EXPORTS
 
 
 def map_size(text: str) -> int | None:
@@ -52,7 +57,9 @@ def check_flags(args) -> None:
                (args.method not in ("auto", "texture-space"), f"--method {args.method}",
                 "a map is fitted in texture space (the renderer's texels carry it)"),
                (args.rim_mm != 0, "--rim-mm", "leave the rim out with --mask instead"),
-               (args.model_error is not None, "--model-error", "the map fit's errors are the photo's noise alone")]
+               (args.model_error is not None, "--model-error", "the map fit's errors are the photo's noise alone"),
+               ("pbrt" in (args.export or []), "--export pbrt",
+                f"pbrt's subsurface material is written without a texture; export {' or '.join(MAP_EXPORTS)}")]
     for on, flag, why in refused:
         if on:
             raise UsageError(f"{flag} does not go with --albedo-map: {why}")
@@ -63,7 +70,7 @@ def fit_map(args, scene, photo, mask, noise, gain, gain_err, exposure, say) -> i
     from fitting.albedo_map import fit_albedo_map
     from measure.exr import write_exr
 
-    from ._scene_files import fitted_material, scene_with_material
+    from ._scene_files import export_material, fitted_material, scene_with_material
 
     material = scene.material
     if args.profile is not None or args.g is not None:
@@ -113,6 +120,12 @@ def fit_map(args, scene, photo, mask, noise, gain, gain_err, exposure, say) -> i
         if relative.size:
             print(f"  {'map error, median':<24}" + "  ".join(f"{100 * v:.2g} %" for v in np.median(relative, axis=0)))
         print(f"  {'gain':<24}{exposure}")
+    if args.export and not fit.converged:
+        print(f"{args.prog}: warning: no material exported: the map fit did not converge", file=sys.stderr)
+    elif args.export:
+        written += [path for _, path in export_material(args.export, out / f"{stem}.fit", fit.medium,
+                                                        g=scene.material.g, unit_mm=args.unit_mm,
+                                                        albedo_map=fit.albedo)]
     print("wrote " + ", ".join(str(p) for p in [map_path, err_path, *written]),
           file=sys.stderr if args.json else sys.stdout)
     if not fit.converged:

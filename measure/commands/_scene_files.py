@@ -1,6 +1,7 @@
 """Scene files the commands write (tomlkit): a new scene around a fitted medium
 (``fit-params --scene``), and a user's scene with its ``[material]`` replaced by a fit
-(``jsss-render fit``), keeping the rest of the file, comments included.
+(``jsss-render fit``), keeping the rest of the file, comments included; and a fitted material
+for other renderers (``--export``, both commands), with a fitted colour map as their textures.
 
 The scene format, and its checks with their did-you-mean messages, are
 :mod:`jsss.render.scene`'s; this module only writes what that reads.
@@ -11,7 +12,10 @@ from __future__ import annotations
 import numpy as np
 import tomlkit
 
-__all__ = ["fitted_material", "scene_with_material", "sphere_scene"]
+__all__ = ["EXPORTS", "MAP_EXPORTS", "export_material", "fitted_material", "scene_with_material", "sphere_scene"]
+
+EXPORTS = {"mitsuba": "_mitsuba.xml", "pbrt": ".pbrt", "blender": "_blender.py"}  # the file each writes, after a prefix
+MAP_EXPORTS = {"mitsuba": "_mitsuba_transmittance.exr", "blender": "_blender_colour.exr"}  # and its texture
 
 
 def _rgb(values) -> list[float]:
@@ -62,3 +66,36 @@ def scene_with_material(scene_text: str, material) -> str:
     doc = tomlkit.parse(scene_text)
     doc["material"] = material
     return tomlkit.dumps(doc)
+
+
+def export_material(kinds, prefix, medium, *, g: float, unit_mm: float, albedo_map=None) -> list:
+    """Write ``medium`` for each renderer in ``kinds`` (:data:`EXPORTS`' keys) to ``PREFIX`` plus
+    the format's suffix, atomically; with ``albedo_map`` (a pre-post colour map, rows with v
+    increasing) also each format's texture beside it, in the map files' layout (bottom row
+    v = 0): Mitsuba's sqrt(c) transmittance and Cycles' Base Color (:mod:`measure.export`'s
+    "Colour maps"). pbrt takes no map (ValueError: the command checks it first). Returns
+    ``(kind, path)`` of each file written."""
+    from pathlib import Path
+
+    from measure import export
+    from measure.exr import write_exr
+
+    from ._console import write_text
+
+    prefix, written = Path(prefix), []
+    for kind in dict.fromkeys(kinds):
+        path = prefix.with_name(prefix.name + EXPORTS[kind])
+        options = {"g": g, "unit_mm": unit_mm, "name": prefix.name}
+        if albedo_map is not None:
+            if kind not in MAP_EXPORTS:
+                raise ValueError(f"the {kind} export takes no colour map (maps go to {', '.join(MAP_EXPORTS)})")
+            texture = prefix.with_name(prefix.name + MAP_EXPORTS[kind])
+            image = (export.prepost_transmittance(albedo_map) if kind == "mitsuba"
+                     else export.blender_colour_map(medium, albedo_map, g=g))
+            write_exr(texture, image[::-1].astype(np.float32))
+            options["transmittance" if kind == "mitsuba" else "colour_map"] = texture.name
+            written.append((f"{kind} texture", texture))
+        writer = {"mitsuba": export.mitsuba_xml, "pbrt": export.pbrt_material, "blender": export.blender_python}[kind]
+        write_text(path, writer(medium, **options))
+        written.append((f"{kind} material", path))
+    return written

@@ -45,12 +45,12 @@ from ._console import (
     write_atomically,
     write_text,
 )
+from ._scene_files import EXPORTS
 
 __all__ = ["main", "parser"]
 
 PROG = "fit-params"
 
-EXPORTS = {"mitsuba": "_mitsuba.xml", "pbrt": ".pbrt", "blender": "_blender.py"}
 
 # How measure.files names the arguments in its messages: as this command's options.
 OPTION_NAMES = {"eta": "--eta", "pixel_mm": "--pixel-mm", "reference_reflectance": "--reference-reflectance",
@@ -468,18 +468,12 @@ def _write_exports(result, args, stem) -> list[str]:
     """The fitted material for other renderers (--export) and as a jsss scene (--scene).
 
     Returns the lines that say what was written (stdout, or stderr with --json)."""
-    from measure import export
+    from ._scene_files import export_material, fitted_material, sphere_scene
 
-    from ._scene_files import fitted_material, sphere_scene
-
-    said = []
     medium, g = result.fit.medium, result.g
     prefix = Path(args.export_to) if args.export_to else Path(stem)
-    writers = {"mitsuba": export.mitsuba_xml, "pbrt": export.pbrt_material, "blender": export.blender_python}
-    for kind in dict.fromkeys(args.export or []):
-        path = prefix.with_name(prefix.name + EXPORTS[kind])
-        write_text(path, writers[kind](medium, g=g, unit_mm=args.unit_mm, name=prefix.name))
-        said.append(f"{kind} material written to {path}")
+    said = [f"{kind} written to {path}" for kind, path in
+            export_material(args.export or [], prefix, medium, g=g, unit_mm=args.unit_mm)]
     if args.scene:
         write_text(args.scene, sphere_scene(fitted_material(medium, profile=result.model, g=g),
                                             label=f"fit-params {stem}"))

@@ -38,6 +38,7 @@ from ._console import (
     write_fit_files,
     write_png,
 )
+from ._scene_files import EXPORTS
 
 __all__ = ["main", "parser"]
 
@@ -201,6 +202,13 @@ def _fit_parser(commands, methods):
                    help="fit a colour map (texels per side, or auto: about one per pixel's footprint) and one mean "
                         "free path per channel instead of sigma_a and sigma_s' (the scene's reduced albedo held); "
                         "writes PHOTO.albedo.exr, PHOTO.albedo_err.exr and a .fit.toml that renders the map")
+    p.add_argument("--export", action="append", choices=sorted(EXPORTS), metavar="FORMAT",
+                   help="also write the fitted material for another renderer, beside the .fit.toml: mitsuba "
+                        "(PHOTO.fit_mitsuba.xml), pbrt (PHOTO.fit.pbrt) or blender (PHOTO.fit_blender.py); with "
+                        "--albedo-map, mitsuba and blender carry the map as a texture (an EXR beside them); "
+                        "repeat for several. Written only when the fit is a measurement")
+    p.add_argument("--unit-mm", type=float, default=1.0,
+                   help="millimetres per scene unit of the exported materials (default 1; 1000 for metres)")
     p.add_argument("--rim-mm", type=float, default=0.0,
                    help="leave out pixels within this distance [mm] of an open surface's rim (default 0)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
@@ -425,11 +433,14 @@ def _fit(args) -> int:
     from jsss.render.passes import Method
     from measure.photo import read_image
 
-    from ._scene_files import fitted_material, scene_with_material
+    from ._scene_files import export_material, fitted_material, scene_with_material
 
     if args.saturation is not None and not (math.isfinite(args.saturation) and args.saturation > 0):
         raise UsageError(f"--saturation must be > 0 (the pixel value at which the camera clipped); "
                          f"got {args.saturation:g}")
+    if not (math.isfinite(args.unit_mm) and args.unit_mm > 0):
+        raise UsageError(f"--unit-mm must be > 0 (millimetres per scene unit: 1 for mm, 1000 for metres); "
+                         f"got {args.unit_mm:g}")
     if Path(args.output).exists() and not Path(args.output).is_dir():
         raise UsageError(f"-o {args.output}: is a file; give a folder for the .fit.json, .fit.toml and .fit.png")
     args.scene = (_example_paths([args.scene]) or [args.scene])[0]
@@ -485,6 +496,11 @@ def _fit(args) -> int:
             "mask": f"masked: {result.highlight_pixels} pixels left out",
             "model": f"modelled at the scene's roughness {result.roughness:g}, held",
             "none": "none in the fit (--no-specular or the scene's specular = 0)"}[result.highlight])
+    if args.export and result.gain_unresolved:
+        print(f"{args.prog}: warning: no material exported: the exposure is unresolved", file=sys.stderr)
+    elif args.export:
+        written += [path for _, path in export_material(args.export, Path(args.output) / f"{stem}.fit", result.medium,
+                                                        g=float(fitted["g"]), unit_mm=args.unit_mm)]
     print("wrote " + ", ".join(str(p) for p in written), file=sys.stderr if args.json else sys.stdout)
     if result.gain_unresolved:
         print(f"{args.prog}: error: the exposure is unresolved, so R_d and sigma_a are not measurements: add a white "

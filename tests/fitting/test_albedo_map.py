@@ -154,8 +154,9 @@ def test_the_command_writes_a_map_that_renders_the_photo(tmp_path, capsys):
     import json
 
     from jsss.render import load_scene
+    from measure import export
     from measure.commands import render as render_command
-    from measure.exr import write_exr
+    from measure.exr import read_exr, write_exr
 
     (tmp_path / "plane.toml").write_text(SMALL)
     scene = parse_scene(tomllib.loads(SMALL), source="plane.toml")
@@ -167,11 +168,24 @@ def test_the_command_writes_a_map_that_renders_the_photo(tmp_path, capsys):
     photo = clean * (1 + 0.01 * np.random.default_rng(3).standard_normal(clean.shape))
     write_exr(tmp_path / "photo.exr", photo.astype(np.float32))
     status = render_command.main(["fit", str(tmp_path / "plane.toml"), str(tmp_path / "photo.exr"), "-o", str(tmp_path),
-                                  "--no-gain", "--albedo-map", "8", "--noise", "0.01", "-q", "--json"])
+                                  "--no-gain", "--albedo-map", "8", "--noise", "0.01", "-q", "--json",
+                                  "--export", "mitsuba", "--export", "blender"])
     summary = json.loads(capsys.readouterr().out)
     assert status == 0 and summary["converged"] and summary["texels_seen"] >= 40
     assert {p.name for p in tmp_path.iterdir()} >= {"photo.albedo.exr", "photo.albedo_err.exr", "photo.fit.toml",
-                                                    "photo.fit.json", "photo.fit.png"}
+                                                    "photo.fit.json", "photo.fit.png", "photo.fit_mitsuba.xml",
+                                                    "photo.fit_mitsuba_transmittance.exr", "photo.fit_blender.py",
+                                                    "photo.fit_blender_colour.exr"}
+    # The exports' textures are the fitted map in its file's layout: sqrt(c) for Mitsuba, Cycles'
+    # colour of c R_d for Blender, each naming its file
+    fitted_map = read_exr(tmp_path / "photo.albedo.exr").pixels
+    transmittance = read_exr(tmp_path / "photo.fit_mitsuba_transmittance.exr").pixels
+    assert np.allclose(transmittance ** 2, fitted_map, rtol=1e-6)
+    medium = load_scene(tmp_path / "photo.fit.toml").material.medium
+    colour = read_exr(tmp_path / "photo.fit_blender_colour.exr").pixels
+    assert np.allclose(colour, export.blender_colour_map(medium, fitted_map.astype(float)), rtol=1e-6, atol=1e-7)
+    assert 'value="photo.fit_mitsuba_transmittance.exr"' in (tmp_path / "photo.fit_mitsuba.xml").read_text()
+    assert "'photo.fit_blender_colour.exr'" in (tmp_path / "photo.fit_blender.py").read_text()
     fitted = load_scene(tmp_path / "photo.fit.toml")
     assert fitted.material.maps.colour is not None
     again = np.asarray(render(fitted, without_legs(plan_scene(fitted, accuracy=0.001, method="texture-space")),
@@ -186,7 +200,8 @@ def test_the_command_writes_a_map_that_renders_the_photo(tmp_path, capsys):
 @pytest.mark.parametrize("flags, named", [(["--fit-gain"], "--fit-gain does not go with --albedo-map"),
                                           (["--no-gain", "--highlight", "mask"], "--highlight mask does not go"),
                                           (["--no-gain", "--method", "lambert"], "--method lambert does not go"),
-                                          (["--no-gain", "--albedo-map", "1"], "--albedo-map must be 'auto'")])
+                                          (["--no-gain", "--albedo-map", "1"], "--albedo-map must be 'auto'"),
+                                          (["--no-gain", "--export", "pbrt"], "--export pbrt does not go with")])
 def test_the_command_names_a_flag_the_map_fit_cannot_take(tmp_path, capsys, flags, named):
     from measure.commands import render as render_command
     from measure.exr import write_exr

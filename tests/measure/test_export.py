@@ -263,3 +263,94 @@ def test_a_clear_channel_gets_no_cycles_colour():
     p = export.blender_principled(Medium([0.5, 1.0, 1.0], [0.0, 0.9e-3, 1.1e-3], 1.33))
     assert p["total_reflectance"][0] == 0.0 and p["base_color"][0] < 1e-12
     assert p["total_reflectance"][1] / p["total_reflectance"][2] == pytest.approx(0.9 / 1.1, rel=0.01)
+
+
+def _render_with_map(mi, folder, medium, albedo_map, spp=16):
+    """The Mitsuba preview (furnace sphere) of ``medium`` with a colour map, as the command writes
+    it: the transmittance EXR in the map file's layout (array row 0, v = 0, at the file's bottom)."""
+    from measure.exr import write_exr
+
+    write_exr(folder / "map_transmittance.exr", export.prepost_transmittance(albedo_map)[::-1].astype(np.float32))
+    (folder / "material.xml").write_text(export.mitsuba_xml(medium, transmittance="map_transmittance.exr"))
+    return np.array(mi.render(mi.load_file(str(folder / "material.xml")), spp=spp))[..., :3]
+
+
+def test_a_colour_maps_mitsuba_texture_weighs_each_crossing_by_its_sqrt(tmp_path):
+    """A uniform map c on a non-absorbing sphere in a white furnace: a camera ray reflects with
+    probability F (radiance 1) or enters (sqrt(c)), and all the light leaves (sqrt(c) again), so
+    the sphere shows F + (1 - F) c at near-normal view: c, not sqrt(c) (one crossing weighed) nor 1
+    (none). c = 1.21: a map brighter than its medium is multiplied as it is."""
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    c = np.array([0.25, 0.64, 1.21])
+    eta = 1.3
+    image = _render_with_map(mi, tmp_path, Medium(0.0, 0.25, eta), np.broadcast_to(c, (4, 4, 3)))
+    centre = image[28:36, 28:36].mean((0, 1))  # within 14 degrees of normal: F within 2e-4 of F(0)
+    f0 = ((eta - 1) / (eta + 1)) ** 2
+    assert np.all(np.abs(centre - (f0 + (1 - f0) * c)) < 0.005), centre
+
+
+def test_a_colour_maps_mitsuba_texture_lies_in_jsss_uv_layout(tmp_path):
+    """The map dark (c = 0.04) in its first rows, v < 1/2: jsss's sphere puts v = 0 at +z, so the
+    upper half of the preview's sphere is dark (light entering there is weighed by 0.2), the lower
+    light. A flipped v (Mitsuba's sphere reads an image's top row at v = 0) swaps them."""
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    albedo_map = np.ones((8, 8, 3))
+    albedo_map[:4] = 0.04
+    image = _render_with_map(mi, tmp_path, Medium(0.0, 0.25, 1.3), albedo_map).mean(-1)
+    upper, lower = image[16:26, 26:38].mean(), image[38:48, 26:38].mean()
+    assert upper < 0.25 and lower > 0.4, (upper, lower)
+
+
+def test_a_colour_maps_blender_colour_is_the_medium_colour_times_the_map():
+    """c = 1 gives the homogeneous export's Base Color; each texel's colour makes Cycles' walk
+    return c R_d (the walk model inverted); the script loads the colour map into Base Color."""
+    medium = jensen2001("marble")
+    p = export.blender_principled(medium)
+    albedo_map = np.ones((2, 3, 3))
+    albedo_map[1] = [0.5, 0.8, 0.9]
+    colour = export.blender_colour_map(medium, albedo_map)
+    assert colour.shape == albedo_map.shape
+    assert np.allclose(colour[0], p["base_color"], rtol=1e-9)
+    alpha = cycles_walk.albedo_from_colour(colour[1, 0])
+    returned = np.array([cycles_walk.walk_reflectance(a) for a in alpha])
+    assert np.allclose(returned, albedo_map[1, 0] * np.asarray(p["total_reflectance"]), rtol=2e-3)
+    script = export.blender_python(medium, colour_map="fit_colour.exr")
+    ast.parse(script)
+    assert "'fit_colour.exr'" in script and "node.inputs['Base Color']" in script.split("links.new(")[-1]
+    with pytest.warns(UserWarning, match="Cycles' walk returns"):
+        export.blender_colour_map(medium, np.full((1, 1, 3), 1.5))
+
+
+@pytest.mark.parametrize("bad", [np.full((2, 2, 3), -0.1), np.full((2, 2, 3), np.nan), np.ones((2, 2))])
+def test_a_bad_colour_map_is_named(bad):
+    with pytest.raises(ValueError, match="colour map"):
+        export.prepost_transmittance(bad)
+
+
+def test_jsss_render_fit_exports_the_fitted_medium(tmp_path, capsys):
+    """``jsss-render fit --export``: the files sit beside the .fit.toml and carry the fitted
+    medium (the .fit.json's), in scene units of --unit-mm; a bad --unit-mm is one line, exit 2."""
+    import json
+
+    from measure.commands import render as render_command
+
+    scene = tmp_path / "s.toml"
+    scene.write_text('[geometry]\nshape = "sphere"\nradius = 20.0\n[material]\nname = "marble"\n'
+                     '[[lights]]\ntype = "environment"\n'
+                     '[camera]\nposition = [0.0, -110.0, 30.0]\nfov = 28\nresolution = [32, 24]\n')
+    assert render_command.main([str(scene), "-o", str(tmp_path / "photo.png"), "-q"]) == 0
+    argv = ["fit", str(scene), str(tmp_path / "photo.exr"), "-o", str(tmp_path / "out"), "--no-gain", "-q",
+            "--method", "lambert", "--export", "mitsuba", "--export", "pbrt", "--unit-mm", "10"]
+    assert render_command.main(argv) == 0
+    assert "photo.fit_mitsuba.xml" in capsys.readouterr().out
+    fitted = json.loads((tmp_path / "out" / "photo.fit.json").read_text())
+    root = ET.fromstring((tmp_path / "out" / "photo.fit_mitsuba.xml").read_text().split("-->\n", 1)[1])
+    sigma_a, sigma_s, g = _medium_back(root)
+    assert np.allclose(sigma_a, 10 * np.asarray(fitted["sigma_a"]), rtol=1e-6)  # 1/(10 mm)
+    assert np.allclose(sigma_s * (1 - g), 10 * np.asarray(fitted["sigma_s_prime"]), rtol=1e-6)
+    assert (tmp_path / "out" / "photo.fit.pbrt").is_file()
+    assert render_command.main(argv[:-1] + ["0"]) == 2
+    err = capsys.readouterr().err
+    assert "--unit-mm must be > 0" in err and len(err.strip().splitlines()) == 1
