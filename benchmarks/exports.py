@@ -173,15 +173,26 @@ def blender_python() -> str:
     return os.environ.get("JSSS_BPY_PYTHON") or sys.executable
 
 
-def render_cycles(medium, *, g=0.0, spp=1024, resolution=16, seed=0, threads=2, own_albedo=False):
+def render_cycles(medium, *, g=0.0, spp=1024, resolution=16, seed=0, threads=2, own_albedo=False, albedo_map=None):
     """The exported Blender script on the slab, rendered by Cycles in a child process (bpy
     stays out of this one): per-channel mean, standard error, seconds. ``own_albedo``: with
     the colour of the medium's own single-scattering albedo instead (the export until
-    2026-12-04, for comparison)."""
+    2026-12-04, for comparison). ``albedo_map``: a pre-post colour map (rows, columns, 3),
+    exported as ``jsss-render fit --albedo-map --export blender`` writes it (the script and
+    its colour EXR, side by side in the child's folder)."""
+    import tempfile
+
     from measure import export
+    from measure.exr import write_exr
 
     mfp = slab_size(medium)
-    script = export.blender_python(medium, g=g)
+    folder = tempfile.TemporaryDirectory()
+    if albedo_map is None:
+        script = export.blender_python(medium, g=g)
+    else:
+        write_exr(Path(folder.name) / "colour.exr", export.blender_colour_map(medium, albedo_map, g=g)[::-1]
+                  .astype(np.float32))
+        script = export.blender_python(medium, g=g, colour_map="colour.exr")
     if own_albedo:
         _, sigma_s, _ = export.scattering_coefficients(medium, g=g)
         alpha = sigma_s / (np.asarray(medium.sigma_a, float) + sigma_s)
@@ -190,8 +201,9 @@ def render_cycles(medium, *, g=0.0, spp=1024, resolution=16, seed=0, threads=2, 
                            if line.startswith("node.inputs['Base Color']") else line for line in script.splitlines())
     args = {"script": script, "spp": spp, "resolution": resolution, "seed": seed,
             "threads": threads, "size": SLAB_MEAN_FREE_PATHS * mfp, "view": VIEW_MEAN_FREE_PATHS * mfp, "mfp": mfp}
-    done = subprocess.run([blender_python(), str(Path(__file__).resolve()), "--cycles-child", json.dumps(args)],
-                          capture_output=True, text=True, cwd=ROOT, check=False)
+    with folder:  # the script reads its texture from the working folder (run without __file__)
+        done = subprocess.run([blender_python(), str(Path(__file__).resolve()), "--cycles-child", json.dumps(args)],
+                              capture_output=True, text=True, cwd=folder.name, check=False)
     if done.returncode != 0:
         raise RuntimeError(f"the Cycles child failed ({done.returncode}):\n{done.stderr[-3000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
