@@ -849,8 +849,8 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     if not (0 < float(highlight_share) < 1):
         raise RenderFitError(f"highlight_share must lie in (0, 1) (0.02: the highlight is 2 % of the pixel's light); "
                              f"got {highlight_share!r}.")
-    if not (np.isfinite(float(model_error)) and float(model_error) >= 0):
-        raise RenderFitError(f"model_error must be a relative error >= 0 (0.015 for 1.5 %); got {model_error!r}.")
+    if not (np.isfinite(float(model_error)) and 0 <= float(model_error) < 1):
+        raise RenderFitError(f"model_error must be a relative error in [0, 1) (0.015 for 1.5 %); got {model_error!r}.")
     if not (float(roughness_range) >= 1 and np.isfinite(float(roughness_range))):
         raise RenderFitError(f"roughness_range must be a finite factor >= 1; got {roughness_range!r}.")
     # No surface reflection in the fit: nothing to mask or fit
@@ -1064,9 +1064,9 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     J = np.asarray(jac)
     if not (np.isfinite(r).all() and np.isfinite(J).all()):
         # A NaN from the renderer would otherwise surface as "eigenvalues did not converge".
+        held = np.exp(np.asarray(_held_in_range(theta)))
         raise RenderFitError(f"{scene.source}: the fit's render or its derivative is not finite at sigma_a = "
-                             f"{np.exp(np.asarray(_held_in_range(theta))[:3]).tolist()}, "
-                             f"sigma_s' = {np.exp(np.asarray(_held_in_range(theta))[3:6]).tolist()} "
+                             f"{held[:3].tolist()}, sigma_s' = {held[3:6].tolist()} "
                              f"({plan.method}, {profile_model}); "
                              "this is a bug in jsss: please report it with the scene.")
     cov, null = covariance(J, error_scale(chi2))

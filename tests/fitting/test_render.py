@@ -150,7 +150,8 @@ def test_methods_without_spread_report_the_mean_free_path_unconstrained(scene, m
     ("nan", "pixels on the object are NaN or infinite"),
     ("lights", "the scene has no lights"),
     ("channels", "expected an RGB image"),
-    ("model_error", "model_error must be a relative error >= 0"),
+    ("model_error", r"model_error must be a relative error in \[0, 1\)"),
+    ("model_error_one", r"model_error must be a relative error in \[0, 1\) .*; got 1.0"),
 ])
 def test_bad_input_is_one_clear_error(scene, case, message):
     photo = np.ones((48, 64, 3))
@@ -163,7 +164,8 @@ def test_bad_input_is_one_clear_error(scene, case, message):
     elif case == "channels":
         photo = np.ones((48, 64))
     with pytest.raises(RenderFitError, match=message):
-        fit_render(scene, photo, gain="fit", **({"model_error": float("nan")} if case == "model_error" else {}))
+        model_error = {"model_error": float("nan"), "model_error_one": 1.0}
+        fit_render(scene, photo, gain="fit", **({"model_error": model_error[case]} if case in model_error else {}))
 
 
 def test_fit_command_writes_parameters_a_renderable_scene_and_a_figure(scene, tmp_path):
