@@ -29,8 +29,9 @@ exit law, the deposit depth) is held at the start's; the fit re-plans when the f
 planner's variances.
 
 Solver: Gauss-Newton on the whitened residuals :math:`r = (g L - I)/s`, each step's normal
-equations :math:`J^T J\,\delta = -J^T r` solved by conjugate gradients (:class:`lineax.CG`)
-on :math:`v \mapsto J^T (J v)` from :func:`jax.linearize` and its transpose: the Jacobian is never
+equations :math:`J^T J\,\delta = -J^T r` solved by conjugate gradients (:class:`lineax.CG`'s
+iteration and stop, without its extra products: :func:`_conjugate_gradients`) on
+:math:`v \mapsto J^T (J v)` from :func:`jax.linearize` and its transpose: the Jacobian is never
 formed. CG runs on the system scaled by its diagonal, :math:`D^{-1/2} A D^{-1/2}`, whose texel
 entries are probed (nine products: the map coloured on a 3 x 3 lattice, random signs per
 colour; again once the unknowns moved by :data:`DIAGONAL_DRIFT`) and whose mean free path entries
@@ -41,7 +42,8 @@ only refreshes the frame) ends on a loose step (on the tests' plane: CG 2890 -> 
 the result within its errors). The programs (residuals, images, diagonal, solves) are compiled once per
 *structure* -- map size, the plan's layout of the geometry (:mod:`jsss.render.programs`), dtypes
 -- and kept across fits, with the geometry's arrays as their arguments: a second fit of the
-same scene compiles none of them.
+same scene compiles none of them. The error probes' solves share one program
+(:meth:`_Programs._solve_each`): the residuals are linearised once for all of them.
 
 Uncertainty: the covariance is :math:`s^2 (J^T J)^{-1}` with :math:`s^2 = \max(1, \chi^2/\nu)`
 (:mod:`fitting.statistics`). Its diagonal is estimated by *probing* (``errors="probe"``): the map
@@ -510,6 +512,45 @@ class _Data(eqx.Module):
     diagonal_signs: jax.Array  # (DIAGONAL_SPACING^2, H_m, W_m, 3): the probes of diag(J^T J)
 
 
+def _conjugate_gradients(mv, b, atol, max_steps):
+    """Conjugate gradients on ``mv`` (symmetric positive definite) from zero: ``(y, steps, ok)``.
+
+    :class:`lineax.CG`'s iteration and stopping rule (while the residual's 2-norm or the last
+    update's exceeds ``atol``, its curvature positive, at most ``max_steps``), without its two
+    extra products: ``A y0`` at the start (y0 = 0: the residual is ``b``) and the residual
+    recomputed as ``b - A y`` every tenth iteration (in float64 the recursive residual it
+    corrects drifts by rounding only). They had been 85 of the 320 x 240 benchmark's 712
+    products of J^T J (40 solves, 627 iterations); its CG iterations are the same (627)."""
+    dot = lambda a, c: sum(jnp.sum(p * q) for p, q in zip(jax.tree.leaves(a), jax.tree.leaves(c)))
+    leaves = jax.tree.leaves(b)
+    rcond = jnp.finfo(jnp.result_type(*leaves)).eps * sum(leaf.size for leaf in leaves)
+
+    def not_converged(r, diff):
+        return (optx.two_norm(jax.tree.map(lambda a: a / atol, r)) > 1) | \
+            (optx.two_norm(jax.tree.map(lambda a: a / atol, diff)) > 1)
+
+    def cond(state):
+        diff, _, r, _, gamma, step = state
+        return (gamma > 0) & (step < max_steps) & not_converged(r, diff)
+
+    def body(state):
+        _, y, r, p, gamma, step = state
+        Ap = mv(p)
+        curvature = dot(Ap, p)
+        alpha = jnp.where(jnp.abs(curvature) > 100 * rcond * jnp.abs(gamma), gamma / curvature, jnp.nan)
+        diff = jax.tree.map(lambda a: alpha * a, p)
+        y = jax.tree.map(jnp.add, y, diff)
+        r = jax.tree.map(lambda a, c: a - alpha * c, r, Ap)
+        gamma_next = dot(r, r)
+        p = jax.tree.map(lambda a, c: a + (gamma_next / gamma) * c, r, p)
+        return diff, y, r, p, gamma_next, step + 1
+
+    zeros = jax.tree.map(jnp.zeros_like, b)
+    start = (jax.tree.map(lambda a: jnp.full_like(a, jnp.inf), b), zeros, b, b, dot(b, b), jnp.asarray(0))
+    _, y, _, _, _, steps = jax.lax.while_loop(cond, body, start)
+    return y, steps, steps < max_steps
+
+
 @functools.lru_cache(maxsize=8)
 def _programs(structure: _Structure) -> _Programs:
     """The compiled residuals, images, diagonal and solves of ``structure``: a second fit of the same
@@ -531,6 +572,7 @@ class _Programs:
         self.images = eqx.filter_jit(self._images)
         self.diagonal = eqx.filter_jit(self._diagonal)
         self.solve = eqx.filter_jit(self._solve)
+        self.solve_each = eqx.filter_jit(self._solve_each)
 
     def _prepared(self, data):
         return tuple((method, fill(layout, arrays)) for (method, layout), arrays in zip(self.structure.layouts, data.arrays))
@@ -579,10 +621,8 @@ class _Programs:
         eta = jnp.where(safeguard > 0.1, jnp.maximum(eta, safeguard), eta)
         eta = jnp.where(previous > 0, jnp.clip(eta, rtol, FORCING_MAX), FORCING_MAX)
         rtol = jnp.where(eta_previous >= 0, eta, rtol)
-        solver = lx.CG(rtol=0.0, atol=rtol * size, norm=optx.two_norm, max_steps=self.structure.cg_max_steps)
-        sol = lx.linear_solve(scaled, rhs, solver, throw=False)
-        return (jax.tree.map(jnp.divide, sol.value, root), sol.stats["num_steps"],
-                sol.result == lx.RESULTS.successful, size, rtol)
+        value, steps, ok = _conjugate_gradients(scaled.mv, rhs, rtol * size, self.structure.cg_max_steps)
+        return jax.tree.map(jnp.divide, value, root), steps, ok, size, rtol
 
     def _solve(self, x, data, views, b, newton, free, rtol, diagonal, forcing):
         """(J^T J)^-1 on the fitted texels of ``b``, or, where ``newton``, of -J^T r (the Gauss-Newton
@@ -592,6 +632,19 @@ class _Programs:
         d = {"u": diagonal["u"], "ell": jnp.where(free > 0, diagonal["ell"], 1.0)}
         step = jax.tree.map(jnp.negative, project(vjp(r)[0]))
         return self._cg(A, d, jax.tree.map(lambda s, v: jnp.where(newton, s, v), step, b), rtol, forcing)
+
+    def _solve_each(self, x, data, views, bs, rtol, diagonal):
+        """(J^T J)^-1 of each of ``bs`` (a leading axis) with the mean free paths held, at the fixed
+        tolerance ``rtol``: the error probes, one after another in one program. The residuals are
+        linearised once for all of them (a program per probe had repeated that and the unused
+        J^T r each time: 16 probes 17 -> 13 s). Batched instead (vmap), one CG iteration's
+        products had cost more than the probes' one at a time (23 s)."""
+        free = jnp.zeros((), self.dtype)
+        A, _, _, _, _ = self._operator(x, data, views, free)
+        d = {"u": diagonal["u"], "ell": jnp.ones_like(diagonal["ell"])}
+        fixed = (jnp.zeros((), self.dtype), -jnp.ones((), self.dtype))
+        values, steps, ok, _, _ = jax.lax.map(lambda b: self._cg(A, d, b, rtol, fixed), bs)
+        return values, jnp.sum(steps), jnp.all(ok)
 
     def _operator(self, x, data, views, free):
         """J^T J restricted to the fitted texels (identity on the others; on the mean free paths too
@@ -861,6 +914,7 @@ class _Model:
         rng = np.random.default_rng(seed)
         rows, cols = np.indices(self.shape)
         var_u = inf_u.copy()
+        colours, probes = [], []
         for i in range(spacing):
             for j in range(spacing):
                 # signs on the reported texels only: a barely seen one's large inverse entries would
@@ -868,9 +922,13 @@ class _Model:
                 colour = ((rows % spacing == i) & (cols % spacing == j) & self.seen)[..., None]
                 if not colour.any():
                     continue
-                signs = np.where(colour, rng.choice([-1.0, 1.0], size=self.shape + (3,)), 0.0)
-                value, cg, *_ = self._solve(x, self.views, {"u": jnp.asarray(signs, self.dtype), "ell": 0 * ones_ell},
-                                              False, 0.0, diagonal)
-                cg_total += int(cg)
-                var_u = np.where(np.broadcast_to(colour, var_u.shape), signs * np.asarray(value["u"]), var_u)
+                colours.append(colour)
+                probes.append(np.where(colour, rng.choice([-1.0, 1.0], size=self.shape + (3,)), 0.0))
+        if probes:  # one CG solve per colour, all in one program (_Programs._solve_each)
+            bs = {"u": jnp.asarray(np.stack(probes), self.dtype), "ell": jnp.zeros((len(probes), 3), self.dtype)}
+            values, cg, _ = self.programs.solve_each(x, self.data, self.views, bs, jnp.asarray(ERROR_RTOL, self.dtype),
+                                                     diagonal)
+            cg_total += int(cg)
+            for colour, signs, value in zip(colours, probes, np.asarray(values["u"])):
+                var_u = np.where(np.broadcast_to(colour, var_u.shape), signs * value, var_u)
         return var_u + shared, var_ell, cg_total
