@@ -14,7 +14,11 @@ Enderton 2007 sec. 5) with a colour map :math:`c(x)` (:mod:`jsss.render.surface_
   map's scale and the medium's own :math:`R_d` (the map carries the colour, relative to the held
   medium), and the exposure ``gain`` must be given for the same reason (brightness is
   gain x map x R_d; a reference's relative error ``gain_err`` is added to every texel's error in
-  quadrature: it moves the whole map together).
+  quadrature: it moves the whole map together). So is the renderer's own error in each channel's
+  light (``model_error``, :data:`fitting.render.MODEL_ERROR` by default): a channel's subsurface
+  light scaled by :math:`1 + \epsilon` is drawn exactly by its map scaled by :math:`1 + \epsilon`
+  at the same mean free path (the frame is linear in c), so it moves that channel's whole map
+  and nothing else (tested).
 
 The model reuses the renderer's stages (:class:`jsss.render.methods.TextureSpace`): the
 irradiance at a white map, the texel geometry, the blur chain and the texel-to-pixel lookup are
@@ -76,7 +80,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from fitting.render import HUBER_K, RenderFitError, _huber, estimate_noise, fit_pixels
+from fitting.render import HUBER_K, MODEL_ERROR, RenderFitError, _huber, estimate_noise, fit_pixels
 from fitting.statistics import error_scale, reduced_chi2
 from jsss.medium import Medium
 from jsss.render import Material, Method, Pass, Scene, plan_scene, render_params
@@ -147,6 +151,8 @@ class AlbedoMapFit:
     warnings, history : tuple of str
     profile_model : str
         The profile model of the fit ("dipole" or "transport": the scene material's).
+    model_error : float
+        The renderer's relative error included in ``albedo_err`` (``fit_albedo_map``'s).
     """
 
     albedo: np.ndarray
@@ -166,6 +172,7 @@ class AlbedoMapFit:
     warnings: tuple = ()
     history: tuple = ()
     profile_model: str = "dipole"
+    model_error: float = 0.0
 
     @property
     def image(self) -> np.ndarray:
@@ -262,7 +269,8 @@ def _auto_map_size(prepared, use, texture_size) -> int:
     return max(2, texture_size // shrink)
 
 
-def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma=None, noise="estimate", mask=None,
+def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, model_error: float = MODEL_ERROR,
+                   sigma=None, noise="estimate", mask=None,
                    saturation: float | None = None, map_size: int | None = None, init_mean_free_path=None,
                    accuracy: float = 0.001, specular: bool = True, min_pixels: float = 0.5, max_steps: int = 12,
                    cg_rtol: float = 1e-3, cg_max_steps: int = 500, errors: str = "probe", probe_spacing: int = 4,
@@ -280,6 +288,11 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
         Linear radiance up to ``gain``, at the camera's resolution (omit with a list of pairs).
     gain : float or sequence of floats (one per photo)
         Required: photo value per unit linear radiance. ``gain_err``: its relative error.
+    model_error : float
+        The renderer's relative error in each channel's subsurface light, in [0, 1) (default
+        :data:`fitting.render.MODEL_ERROR`, its frames against a path tracer; 0 for a photo jsss
+        rendered itself): added in quadrature to every seen texel's relative error, as
+        ``gain_err`` is, since it moves the channel's whole map (module docstring).
     sigma : array broadcastable to the photo (or one per photo), optional
         Each pixel's standard error. Else ``noise``: a relative error (times the pixel value,
         floored at 1 % of the 99th percentile), or ``"estimate"`` (:func:`fitting.render.estimate_noise`
@@ -329,6 +342,8 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
     if not pairs or any(p is None for _, p in pairs):
         raise AlbedoMapError("photo: give a photo, or a list of (scene, photo) pairs as the first argument.")
     gains, gain_err = _check_gain(gain, gain_err, len(pairs))
+    if not (np.isfinite(float(model_error)) and 0 <= float(model_error) < 1):
+        raise AlbedoMapError(f"model_error must be a relative error in [0, 1) (0.015 for 1.5 %); got {model_error!r}.")
     if loss not in ("huber", "squared"):
         raise AlbedoMapError(f"loss must be 'huber' or 'squared'; got {loss!r}.")
     robust = loss == "huber"
@@ -440,7 +455,10 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
     albedo = np.asarray(jnp.exp(u))
     seen = np.asarray(model.seen)
     # A probe estimate that came out non-positive (its scatter exceeded the variance) is no error: inf, flagged
-    rel = np.sqrt(np.where(var_u > 0, var_u * scale, np.inf) + gain_err**2)
+    rel = np.sqrt(np.where(var_u > 0, var_u * scale, np.inf) + gain_err**2 + float(model_error)**2)
+    if model_error > 0:
+        history.append(f"the map's errors include the renderer's own, {100 * float(model_error):g} % of each channel's "
+                       "subsurface light (model_error), shared by all texels of a channel")
     albedo_err = np.where(seen[..., None], albedo * rel, np.inf)
     mfp = np.exp(np.asarray(ell))
     mfp_err = mfp * np.sqrt(np.clip(var_ell * scale, 0, None))
@@ -462,7 +480,7 @@ def fit_albedo_map(scene, photo=None, *, gain=None, gain_err: float = 0.0, sigma
     return AlbedoMapFit(albedo, albedo_err, seen, mfp, mfp_err, medium, chi2,
                         bool(converged) and bool(np.all(np.isfinite(mfp_err))), steps, images, tuple(uses),
                         tuple(np.asarray(s) for s in sigmas), errors, cg_total, tuple(notes), tuple(history),
-                        profile_model)
+                        profile_model, float(model_error))
 
 
 def _sigmas(sigma, noise, estimate, photos, uses):

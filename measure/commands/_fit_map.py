@@ -57,7 +57,6 @@ def check_flags(args) -> None:
                (args.method not in ("auto", "texture-space"), f"--method {args.method}",
                 "a map is fitted in texture space (the renderer's texels carry it)"),
                (args.rim_mm != 0, "--rim-mm", "leave the rim out with --mask instead"),
-               (args.model_error is not None, "--model-error", "the map fit's errors are the photo's noise alone"),
                ("pbrt" in (args.export or []), "--export pbrt",
                 f"pbrt's subsurface material is written without a texture; export {' or '.join(MAP_EXPORTS)}")]
     for on, flag, why in refused:
@@ -78,7 +77,8 @@ def fit_map(args, scene, photo, mask, noise, gain, gain_err, exposure, say) -> i
                                        g=material.g if args.g is None else args.g, profile=None)
         scene = dataclasses.replace(scene, material=material)
     t0 = time.perf_counter()
-    fit = fit_albedo_map(scene, photo, gain=gain, gain_err=gain_err, noise=noise, loss=args.loss, mask=mask,
+    model_error = {} if args.model_error is None else {"model_error": args.model_error}
+    fit = fit_albedo_map(scene, photo, gain=gain, gain_err=gain_err, noise=noise, loss=args.loss, mask=mask, **model_error,
                          saturation=args.saturation, map_size=map_size(args.albedo_map), accuracy=args.accuracy,
                          specular=not args.no_specular, progress=lambda line: say(f"{args.scene}: {line}"))
     seconds = time.perf_counter() - t0
@@ -100,7 +100,8 @@ def fit_map(args, scene, photo, mask, noise, gain, gain_err, exposure, say) -> i
         "mean_free_path_mm": fit.mean_free_path.tolist(), "mean_free_path_err_mm": fit.mean_free_path_err.tolist(),
         "sigma_a": np.asarray(fit.medium.sigma_a).tolist(), "sigma_s_prime": np.asarray(fit.medium.sigma_s_prime).tolist(),
         "eta": np.broadcast_to(np.asarray(fit.medium.eta, float), (3,)).tolist(),
-        "profile_model": profile, "loss": args.loss, "chi2_reduced": fit.chi2_reduced, "converged": fit.converged,
+        "profile_model": profile, "loss": args.loss, "model_error": fit.model_error, "chi2_reduced": fit.chi2_reduced,
+        "converged": fit.converged,
         "steps": fit.steps, "cg_steps": fit.cg_steps, "errors": fit.errors,
         "warnings": list(fit.warnings), "history": list(fit.history)}
     fitted = fitted_material(fit.medium, profile=profile, g=scene.material.g, roughness=material.roughness,

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fitting.albedo_map import AlbedoMapError, fit_albedo_map, without_legs
-from jsss.render import parse_scene, plan_scene, render
+from jsss.render import Pass, parse_scene, plan_scene, render
 from jsss.render.surface_maps import SurfaceMaps
 
 SCENE = """
@@ -82,7 +82,7 @@ def fits(problem):
     the map starts from the photo's own ratio to a white render, and the fit moves the mean
     free path within its errors."""
     scene, _, photo, sigma, mfp = problem
-    common = dict(gain=GAIN, sigma=sigma, map_size=MAP, init_mean_free_path=mfp)
+    common = dict(gain=GAIN, sigma=sigma, map_size=MAP, init_mean_free_path=mfp, model_error=0)  # jsss's own photo
     return (fit_albedo_map(scene, photo, errors="probe", **common),
             fit_albedo_map(scene, photo, errors="exact", **common))
 
@@ -129,6 +129,33 @@ def test_mean_free_path_within_its_errors(problem, fits):
     assert np.all(np.abs(fit.mean_free_path - mfp) < 3 * fit.mean_free_path_err), (fit.mean_free_path, mfp)
 
 
+def test_a_channels_light_scaled_moves_its_map_alone_and_the_model_error_widens_it():
+    """The model error's meaning: a photo whose channels' subsurface light is scaled by 1 + eps is
+    drawn exactly by the map scaled by 1 + eps at the same mean free path (the frame is linear
+    in c), so the renderer's relative error in a channel's light is one more error shared by
+    that channel's texels, added in quadrature (relative), and none on the mean free path."""
+    scene = parse_scene(tomllib.loads(SMALL), source="plane.toml")
+    painted = dataclasses.replace(scene, material=dataclasses.replace(scene.material, maps=SurfaceMaps(albedo=_checker(4))))
+    plan = without_legs(plan_scene(painted, accuracy=0.001, method="texture-space"))
+    plan = plan.replace(Pass.SPECULAR, False, "subsurface light only: the model error is the subsurface light's")
+    clean = np.asarray(render(painted, plan, dtype=jnp.float64).radiance)
+    options = {"gain": 1.0, "noise": 0.01, "map_size": 4, "specular": False}
+    eps = np.array([0.1, 0.0, -0.1])
+    plain = fit_albedo_map(scene, clean, model_error=0.0, **options)
+    scaled = fit_albedo_map(scene, clean * (1 + eps), model_error=0.02, **options)
+    seen = plain.seen
+    assert plain.converged and scaled.converged and seen.sum() >= 8
+    assert np.allclose(scaled.albedo[seen], plain.albedo[seen] * (1 + eps), rtol=2e-3)
+    assert np.allclose(scaled.mean_free_path, plain.mean_free_path, rtol=2e-3)
+    # the photo's relative noise scales with it: the same relative errors, and 2 % in quadrature
+    plain_rel, scaled_rel = (f.albedo_err[seen] / f.albedo[seen] for f in (plain, scaled))
+    assert np.allclose(scaled_rel**2, plain_rel**2 + 0.02**2, rtol=0.02)
+    assert np.allclose(scaled.mean_free_path_err, plain.mean_free_path_err, rtol=0.02)
+    assert scaled.model_error == 0.02 and any("renderer's own" in line for line in scaled.history)
+    with pytest.raises(AlbedoMapError, match=r"model_error must be a relative error in \[0, 1\)"):
+        fit_albedo_map(scene, clean, model_error=1.0, **options)
+
+
 def test_bad_input_names_the_value_and_the_fix(problem):
     scene, _, photo, sigma, _ = problem
     with pytest.raises(AlbedoMapError, match="gain: the photo's exposure is required"):
@@ -168,10 +195,10 @@ def test_the_command_writes_a_map_that_renders_the_photo(tmp_path, capsys):
     photo = clean * (1 + 0.01 * np.random.default_rng(3).standard_normal(clean.shape))
     write_exr(tmp_path / "photo.exr", photo.astype(np.float32))
     status = render_command.main(["fit", str(tmp_path / "plane.toml"), str(tmp_path / "photo.exr"), "-o", str(tmp_path),
-                                  "--no-gain", "--albedo-map", "8", "--noise", "0.01", "-q", "--json",
+                                  "--no-gain", "--albedo-map", "8", "--noise", "0.01", "-q", "--json", "--model-error", "0",
                                   "--export", "mitsuba", "--export", "blender"])
     summary = json.loads(capsys.readouterr().out)
-    assert status == 0 and summary["converged"] and summary["texels_seen"] >= 40
+    assert status == 0 and summary["converged"] and summary["texels_seen"] >= 40 and summary["model_error"] == 0
     assert {p.name for p in tmp_path.iterdir()} >= {"photo.albedo.exr", "photo.albedo_err.exr", "photo.fit.toml",
                                                     "photo.fit.json", "photo.fit.png", "photo.fit_mitsuba.xml",
                                                     "photo.fit_mitsuba_transmittance.exr", "photo.fit_blender.py",
