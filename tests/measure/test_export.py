@@ -284,8 +284,9 @@ def test_a_colour_maps_mitsuba_texture_weighs_each_crossing_by_its_sqrt(tmp_path
     mi.set_variant("scalar_rgb")
     c = np.array([0.25, 0.64, 1.21])
     eta = 1.3
-    image = _render_with_map(mi, tmp_path, Medium(0.0, 0.25, eta), np.broadcast_to(c, (4, 4, 3)))
-    centre = image[28:36, 28:36].mean((0, 1))  # within 14 degrees of normal: F within 2e-4 of F(0)
+    # 128 spp: the share of samples that reflect scatters by 0.0011 in the c = 0.25 channel (4.6 of it allowed)
+    image = _render_with_map(mi, tmp_path, Medium(0.0, 0.25, eta), np.broadcast_to(c, (4, 4, 3)), spp=128)
+    centre = image[28:36, 28:36].mean((0, 1))  # within 11 degrees of normal: F within 2e-4 of F(0)
     f0 = ((eta - 1) / (eta + 1)) ** 2
     assert np.all(np.abs(centre - (f0 + (1 - f0) * c)) < 0.005), centre
 
