@@ -192,7 +192,7 @@ def render_cycles(medium, *, g=0.0, spp=1024, resolution=16, seed=0, threads=2, 
     else:
         write_exr(Path(folder.name) / "colour.exr", export.blender_colour_map(medium, albedo_map, g=g)[::-1]
                   .astype(np.float32))
-        script = export.blender_python(medium, g=g, colour_map="colour.exr")
+        script = export.blender_python(medium, g=g, colour_map=str(Path(folder.name) / "colour.exr"))
     if own_albedo:
         _, sigma_s, _ = export.scattering_coefficients(medium, g=g)
         alpha = sigma_s / (np.asarray(medium.sigma_a, float) + sigma_s)

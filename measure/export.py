@@ -182,7 +182,8 @@ def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True, transm
     the dielectric's ``specular_transmittance``. It lies right on an OBJ mesh with UVs (Mitsuba's
     OBJ loader flips v to that layout). Mitsuba's built-in sphere puts v = 0 (its +z pole, as
     jsss's sphere does) on the image's top row, so the preview's texture flips v (``to_uv``);
-    the declarations alone do not.
+    the declarations alone do not. The texture's values are raw (above 1 where the map is),
+    which Mitsuba's RGB variants render and its spectral ones refuse.
     """
     d = mitsuba_dict(medium, g=g, unit_mm=unit_mm)
     m, b = d["interior"], d["bsdf"]
@@ -202,12 +203,12 @@ def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True, transm
                 + flip + '        </texture>\n')
 
     declarations = (
-        f'    <bsdf type="dielectric" id="{name}_bsdf">\n'
+        f'    <bsdf type="dielectric" id="{_xml_attribute(name)}_bsdf">\n'
         f'        <float name="int_ior" value="{b["int_ior"]:.9g}"/>\n'
         f'        <float name="ext_ior" value="1"/>\n'
         + texture(flip_v=preview) +
         f'    </bsdf>\n'
-        f'    <medium type="homogeneous" id="{name}_medium">\n'
+        f'    <medium type="homogeneous" id="{_xml_attribute(name)}_medium">\n'
         f'        <rgb name="sigma_t" value="{", ".join(f"{v:.9g}" for v in m["sigma_t"]["value"])}"/>\n'
         f'        <rgb name="albedo" value="{", ".join(f"{v:.9g}" for v in m["albedo"]["value"])}"/>\n'
         f'        <float name="scale" value="{m["scale"]:.9g}"/>\n'
@@ -219,8 +220,10 @@ def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True, transm
               f"sigma_s = sigma_s' / (1 - g), g = {float(g):g} -->\n")
     if transmittance is not None:
         header += ("<!-- jsss: a pre-post colour map c: the dielectric's specular_transmittance is sqrt(c) in the map "
-                   "file's layout (OBJ's: bottom row v = 0). The preview's sphere flips v (to_uv); an OBJ mesh "
-                   "needs no flip. -->\n")
+                   "file's layout (OBJ's: bottom row v = 0), raw values, so an RGB variant (scalar_rgb, llvm_ad_rgb, "
+                   "cuda_ad_rgb) renders it"
+                   + (". The preview's built-in sphere needs its v flipped (to_uv): remove the to_uv block when "
+                      "this bsdf goes on an OBJ mesh" if preview else "") + ". -->\n")
     if not preview:
         return header + '<scene version="3.0.0">\n' + declarations + "</scene>\n"
     radius = 20.0 / float(unit_mm)
@@ -233,8 +236,8 @@ def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True, transm
         + declarations +
         f'    <shape type="sphere">\n'
         f'        <float name="radius" value="{radius:.9g}"/>\n'
-        f'        <ref id="{name}_bsdf"/>\n'
-        f'        <ref name="interior" id="{name}_medium"/>\n'
+        f'        <ref id="{_xml_attribute(name)}_bsdf"/>\n'
+        f'        <ref name="interior" id="{_xml_attribute(name)}_medium"/>\n'
         f'    </shape>\n'
         '    <emitter type="constant">\n'
         '        <rgb name="radiance" value="1, 1, 1"/>\n'
@@ -269,7 +272,7 @@ def pbrt_material(medium, *, g=0.0, unit_mm=1.0, name="jsss"):
     unit_mm = _check_unit(unit_mm)
     sigma_a, sigma_s, eta = scattering_coefficients(medium, g=g, unit_mm=1.0)
     return (f"# jsss: sigma in 1/mm, scale = {float(unit_mm):g} mm per scene unit; sigma_s = sigma_s' / (1 - g)\n"
-            f'MakeNamedMaterial "{name}"\n'
+            f'MakeNamedMaterial "{str(name).replace(chr(34), "_")}"\n'
             f'    "string type" [ "subsurface" ]\n'
             f'    "rgb sigma_a" [ {_fmt(_rgb(sigma_a))} ]\n'
             f'    "rgb sigma_s" [ {_fmt(_rgb(sigma_s))} ]\n'
@@ -401,10 +404,11 @@ def blender_python(medium, *, g=0.0, unit_mm=1.0, name="jsss", colour_map=None):
     """A Python script for Blender (4.x) that creates material NAME with :func:`blender_principled`'s inputs.
 
     Run it in Blender's text editor or ``blender --python FILE``; it assigns the material to
-    the active object when there is one. ``colour_map``: the file name, beside the script, of
-    an image of :func:`blender_colour_map` (in the map file's layout, which Blender's image
-    textures share); it goes into Base Color through an Image Texture node (linear,
-    non-colour data, bilinear, clamped at the border) on the object's active UV map.
+    the active object when there is one. ``colour_map``: the path of an image of
+    :func:`blender_colour_map` (in the map file's layout, which Blender's image textures share);
+    the script reads it from the folder it was exported to, else beside the script, the .blend
+    or the working folder, into Base Color through an Image Texture node (linear, non-colour
+    data, bilinear, clamped at the border) on the object's active UV map.
     """
     p = blender_principled(medium, g=g, unit_mm=unit_mm)
     rd = ", ".join(f"{v:.4f}" for v in p["total_reflectance"])
@@ -434,13 +438,24 @@ def blender_python(medium, *, g=0.0, unit_mm=1.0, name="jsss", colour_map=None):
 
 
 def _blender_texture(colour_map) -> str:
-    """The script's lines that read ``colour_map`` (beside the script) into Base Color."""
+    """The script's lines that read ``colour_map`` into Base Color: from the folder it was exported
+    to, else beside the script (``blender --python``), the .blend or the working folder (Blender's
+    text editor names no folder of its own), or one line that says where it looked."""
+    import os
+
+    name, folder = os.path.basename(str(colour_map)), os.path.dirname(os.path.abspath(str(colour_map)))
     return ("# The colour map: per texel the Base Color whose walk returns c R_d (c: the fitted map). Cycles\n"
             "# reads it where the camera sees the surface (post-scatter), not sqrt(c) at both ends (jsss).\n"
             "import os\n"
-            "folder = os.path.dirname(os.path.abspath(__file__)) if '__file__' in globals() else os.getcwd()\n"
-            f"texture = material.node_tree.nodes.new('ShaderNodeTexImage')\n"
-            f"texture.image = bpy.data.images.load(os.path.join(folder, {str(colour_map)!r}))\n"
+            f"colour_map = {name!r}\n"
+            f"folders = [{folder!r}, os.path.dirname(os.path.abspath(__file__)) if '__file__' in globals() else '',\n"
+            "           bpy.path.abspath('//'), os.getcwd()]\n"
+            "found = [os.path.join(f, colour_map) for f in folders if f and os.path.isfile(os.path.join(f, colour_map))]\n"
+            "if not found:\n"
+            "    raise FileNotFoundError(f'{colour_map}: the colour map is in none of {folders}; put it beside this '\n"
+            "                            'script or the .blend')\n"
+            "texture = material.node_tree.nodes.new('ShaderNodeTexImage')\n"
+            "texture.image = bpy.data.images.load(found[0])\n"
             "texture.image.colorspace_settings.name = 'Non-Color'  # linear values, used as they are\n"
             "texture.interpolation = 'Linear'\n"
             "texture.extension = 'EXTEND'  # clamped at the border, as jsss's maps are\n"

@@ -93,7 +93,10 @@ def export_material(kinds, prefix, medium, *, g: float, unit_mm: float, albedo_m
             image = (export.prepost_transmittance(albedo_map) if kind == "mitsuba"
                      else export.blender_colour_map(medium, albedo_map, g=g))
             write_exr(texture, image[::-1].astype(np.float32))
-            options["transmittance" if kind == "mitsuba" else "colour_map"] = texture.name
+            if kind == "mitsuba":  # Mitsuba resolves the name beside the XML
+                options["transmittance"] = texture.name
+            else:  # the script looks in the folder written to first, then beside itself
+                options["colour_map"] = str(texture)
             written.append((f"{kind} texture", texture))
         writer = {"mitsuba": export.mitsuba_xml, "pbrt": export.pbrt_material, "blender": export.blender_python}[kind]
         write_text(path, writer(medium, **options))

@@ -206,7 +206,8 @@ def _fit_parser(commands, methods):
                    help="also write the fitted material for another renderer, beside the .fit.toml: mitsuba "
                         "(PHOTO.fit_mitsuba.xml), pbrt (PHOTO.fit.pbrt) or blender (PHOTO.fit_blender.py); with "
                         "--albedo-map, mitsuba and blender carry the map as a texture (an EXR beside them); "
-                        "repeat for several. Written only when the fit is a measurement")
+                        "repeat for several. Not written when the exposure is unresolved or a map fit did not "
+                        "converge (a warning says so)")
     p.add_argument("--unit-mm", type=float, default=1.0,
                    help="millimetres per scene unit of the exported materials (default 1; 1000 for metres)")
     p.add_argument("--rim-mm", type=float, default=0.0,

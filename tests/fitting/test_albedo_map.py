@@ -9,6 +9,7 @@ renderer's physics (benchmarks/ compare it with a path tracer).
 import dataclasses
 import tomllib
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -154,6 +155,30 @@ def test_a_channels_light_scaled_moves_its_map_alone_and_the_model_error_widens_
     assert scaled.model_error == 0.02 and any("renderer's own" in line for line in scaled.history)
     with pytest.raises(AlbedoMapError, match=r"model_error must be a relative error in \[0, 1\)"):
         fit_albedo_map(scene, clean, model_error=1.0, **options)
+
+
+@pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
+def test_the_fits_conjugate_gradients_are_lineaxs_without_restarts(dtype):
+    """fitting.albedo_map's CG loop against lineax.CG(stabilise_every=None) on a random symmetric
+    positive definite system given as a pytree: the same iterates, step count and solution."""
+    import lineax as lx
+    import optimistix as optx
+
+    from fitting.albedo_map import _conjugate_gradients
+
+    rng = np.random.default_rng(0)
+    m = rng.standard_normal((60, 60))
+    a = jnp.asarray(m @ m.T + 60 * np.eye(60) * np.linspace(0.01, 1, 60), dtype)
+    b = {"u": jnp.asarray(rng.standard_normal(57), dtype), "ell": jnp.asarray(rng.standard_normal(3), dtype)}
+    flat = lambda t: jnp.concatenate([t["u"], t["ell"]])  # noqa: E731
+    mv = lambda t: (lambda y: {"u": y[:57], "ell": y[57:]})(a @ flat(t))  # noqa: E731
+    atol = 1e-6 * float(jnp.linalg.norm(flat(b)))
+    ours, steps, ok = _conjugate_gradients(mv, b, atol, 500)
+    operator = lx.FunctionLinearOperator(mv, jax.eval_shape(lambda: b), tags=lx.positive_semidefinite_tag)
+    theirs = lx.linear_solve(operator, b, lx.CG(rtol=0.0, atol=atol, norm=optx.two_norm, stabilise_every=None,
+                                                max_steps=500), throw=False)
+    assert bool(ok) and int(steps) == int(theirs.stats["num_steps"]) > 10
+    assert np.allclose(flat(ours), flat(theirs.value), rtol=0, atol=1e-12 if dtype == jnp.float64 else 1e-5)
 
 
 def test_bad_input_names_the_value_and_the_fix(problem):

@@ -330,7 +330,7 @@ def test_a_bad_colour_map_is_named(bad):
         export.prepost_transmittance(bad)
 
 
-def test_jsss_render_fit_exports_the_fitted_medium(tmp_path, capsys):
+def test_jsss_render_fit_exports_the_fitted_medium(tmp_path, capsys, monkeypatch):
     """``jsss-render fit --export``: the files sit beside the .fit.toml and carry the fitted
     medium (the .fit.json's), in scene units of --unit-mm; a bad --unit-mm is one line, exit 2."""
     import json
@@ -355,3 +355,30 @@ def test_jsss_render_fit_exports_the_fitted_medium(tmp_path, capsys):
     assert render_command.main(argv[:-1] + ["0"]) == 2
     err = capsys.readouterr().err
     assert "--unit-mm must be > 0" in err and len(err.strip().splitlines()) == 1
+    # A fit whose exposure came out unresolved (R_d and the gain one direction) exports nothing, says
+    # so, and exits 1: the same fit, its result marked so (what fit_render does without a reference)
+    import dataclasses
+
+    import fitting.render
+
+    real = fitting.render.fit_render
+    monkeypatch.setattr(fitting.render, "fit_render",
+                        lambda *a, **k: dataclasses.replace(real(*a, **k), gain_unresolved=True))
+    unresolved = argv[:3] + ["-o", str(tmp_path / "free")] + argv[5:]
+    assert render_command.main(unresolved) == 1
+    assert "no material exported: the exposure is unresolved" in capsys.readouterr().err
+    assert (tmp_path / "free" / "photo.fit.json").is_file() and not (tmp_path / "free" / "photo.fit_mitsuba.xml").exists()
+
+
+def test_a_colour_maps_declarations_do_not_flip_and_names_are_escaped():
+    """The declarations alone (for an OBJ mesh, whose loader flips v itself) carry no to_uv; the
+    preview's sphere does, and its header says to remove it. A quote or ampersand in the name
+    leaves the XML well formed and the pbrt string closed."""
+    medium = jensen2001("marble")
+    alone = export.mitsuba_xml(medium, preview=False, transmittance='a&b".exr', name='x"&y')
+    preview = export.mitsuba_xml(medium, transmittance="t.exr")
+    assert "to_uv" not in alone and "to_uv" in preview and "remove the to_uv block" in preview
+    root = ET.fromstring(alone.split("-->\n", 2)[2])
+    assert root.find("bsdf/texture/string[@name='filename']").get("value") == 'a&b".exr'
+    assert root.find("bsdf").get("id") == 'x"&y_bsdf'
+    assert export.pbrt_material(medium, name='x"y').splitlines()[1] == 'MakeNamedMaterial "x_y"'
