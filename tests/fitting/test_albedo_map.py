@@ -170,8 +170,13 @@ def test_the_fits_conjugate_gradients_are_lineaxs_without_restarts(dtype):
     m = rng.standard_normal((60, 60))
     a = jnp.asarray(m @ m.T + 60 * np.eye(60) * np.linspace(0.01, 1, 60), dtype)
     b = {"u": jnp.asarray(rng.standard_normal(57), dtype), "ell": jnp.asarray(rng.standard_normal(3), dtype)}
-    flat = lambda t: jnp.concatenate([t["u"], t["ell"]])  # noqa: E731
-    mv = lambda t: (lambda y: {"u": y[:57], "ell": y[57:]})(a @ flat(t))  # noqa: E731
+    def flat(t):
+        return jnp.concatenate([t["u"], t["ell"]])
+
+    def mv(t):
+        y = a @ flat(t)
+        return {"u": y[:57], "ell": y[57:]}
+
     atol = 1e-6 * float(jnp.linalg.norm(flat(b)))
     ours, steps, ok = _conjugate_gradients(mv, b, atol, 500)
     operator = lx.FunctionLinearOperator(mv, jax.eval_shape(lambda: b), tags=lx.positive_semidefinite_tag)
