@@ -160,12 +160,17 @@ def prepost_transmittance(albedo_map):
     pre-post map's weight. ``albedo_map``: (rows, columns, 3), finite and >= 0 (``ValueError``
     otherwise); the result has its layout (write it as the map file is written).
     """
+    return np.sqrt(_colour_map(albedo_map))
+
+
+def _colour_map(albedo_map) -> np.ndarray:
+    """``albedo_map`` as a float array, checked: (rows, columns, 3), finite and >= 0 (ValueError)."""
     albedo_map = np.asarray(albedo_map, float)
     if albedo_map.ndim != 3 or albedo_map.shape[-1] != 3:
         raise ValueError(f"a colour map is (rows, columns, 3); got shape {albedo_map.shape}")
     if not np.all(np.isfinite(albedo_map) & (albedo_map >= 0)):
         raise ValueError("a colour map's values must be finite and >= 0")
-    return np.sqrt(albedo_map)
+    return albedo_map
 
 
 def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True, transmittance=None):
@@ -185,30 +190,29 @@ def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True, transm
     the declarations alone do not. The texture's values are raw (above 1 where the map is),
     which Mitsuba's RGB variants render and its spectral ones refuse.
     """
-    d = mitsuba_dict(medium, g=g, unit_mm=unit_mm)
-    m, b = d["interior"], d["bsdf"]
-
-    def texture(flip_v):
-        if transmittance is None:
-            return ""
+    d = mitsuba_dict(medium, g=g, unit_mm=unit_mm, transmittance=transmittance)
+    m, b, ident = d["interior"], d["bsdf"], _xml_attribute(name)
+    texture = ""
+    if transmittance is not None:  # mitsuba_dict's bitmap, written out
+        t = b["specular_transmittance"]
         flip = ('            <transform name="to_uv">\n'
                 '                <scale x="1" y="-1"/>\n'
                 '                <translate x="0" y="1"/>\n'
-                '            </transform>\n') if flip_v else ""
-        return ('        <texture type="bitmap" name="specular_transmittance">\n'
-                f'            <string name="filename" value="{_xml_attribute(transmittance)}"/>\n'
-                '            <boolean name="raw" value="true"/>\n'
-                '            <string name="filter_type" value="bilinear"/>\n'
-                '            <string name="wrap_mode" value="clamp"/>\n'
-                + flip + '        </texture>\n')
+                '            </transform>\n') if preview else ""
+        texture = ('        <texture type="bitmap" name="specular_transmittance">\n'
+                   f'            <string name="filename" value="{_xml_attribute(t["filename"])}"/>\n'
+                   f'            <boolean name="raw" value="{str(t["raw"]).lower()}"/>\n'
+                   f'            <string name="filter_type" value="{t["filter_type"]}"/>\n'
+                   f'            <string name="wrap_mode" value="{t["wrap_mode"]}"/>\n'
+                   + flip + '        </texture>\n')
 
     declarations = (
-        f'    <bsdf type="dielectric" id="{_xml_attribute(name)}_bsdf">\n'
+        f'    <bsdf type="dielectric" id="{ident}_bsdf">\n'
         f'        <float name="int_ior" value="{b["int_ior"]:.9g}"/>\n'
         f'        <float name="ext_ior" value="1"/>\n'
-        + texture(flip_v=preview) +
+        + texture +
         f'    </bsdf>\n'
-        f'    <medium type="homogeneous" id="{_xml_attribute(name)}_medium">\n'
+        f'    <medium type="homogeneous" id="{ident}_medium">\n'
         f'        <rgb name="sigma_t" value="{", ".join(f"{v:.9g}" for v in m["sigma_t"]["value"])}"/>\n'
         f'        <rgb name="albedo" value="{", ".join(f"{v:.9g}" for v in m["albedo"]["value"])}"/>\n'
         f'        <float name="scale" value="{m["scale"]:.9g}"/>\n'
@@ -236,8 +240,8 @@ def mitsuba_xml(medium, *, g=0.0, unit_mm=1.0, name="jsss", preview=True, transm
         + declarations +
         f'    <shape type="sphere">\n'
         f'        <float name="radius" value="{radius:.9g}"/>\n'
-        f'        <ref id="{_xml_attribute(name)}_bsdf"/>\n'
-        f'        <ref name="interior" id="{_xml_attribute(name)}_medium"/>\n'
+        f'        <ref id="{ident}_bsdf"/>\n'
+        f'        <ref name="interior" id="{ident}_medium"/>\n'
         f'    </shape>\n'
         '    <emitter type="constant">\n'
         '        <rgb name="radiance" value="1, 1, 1"/>\n'
@@ -389,7 +393,7 @@ def blender_colour_map(medium, albedo_map, *, g=0.0):
     sqrt(c) at both ends. A total beyond Cycles' walk is clamped with a warning. The result
     has the map's layout.
     """
-    albedo_map = prepost_transmittance(albedo_map) ** 2  # the same checks
+    albedo_map = _colour_map(albedo_map)
     _, _, eta = scattering_coefficients(medium, g=g)
     target = albedo_map * _total_reflectance(medium, float(g), eta)
     alpha, reachable = cycles_walk.albedo_for_reflectance(target, g)
