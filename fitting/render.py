@@ -19,7 +19,10 @@ the starting material; if the fitted profile is not represented on them to the p
 accuracy, they are re-planned and the fit is repeated from
 there (at most ``replans`` times); so are the oblique-incidence law that scales the irradiance
 and the depth at which point lights are read (:mod:`jsss.diffusion.incidence`), which depend on
-the medium (their change within the last round is not in the Jacobian). The exit law
+the medium (their change within the last round is not in the Jacobian). The objective is
+each estimate's misfit on the plan made for it, which jumps where the plan does: a round whose
+estimate fits worse on its own plan than the round's start did on the start's moved along the
+plan's error, not the photo's, and is not kept (the start is the estimate). The exit law
 (:mod:`jsss.diffusion.exit_law`) follows the albedo in every evaluation. The pixel methods
 (Lambert, normal filtering, image-space) are differentiated through their whole frame.
 
@@ -620,6 +623,50 @@ def _block_sums(image, block: int):
     return image[:h * block, :w * block].reshape(h, block, w, block, -1).sum((1, 3))
 
 
+def _plan_changes(plan, next_plan, scene, next_scene, data) -> list[str]:
+    """What a fit's re-plan for its estimate (``next_plan`` for ``next_scene``) changes against the
+    round's ``plan`` for ``scene``, in words; empty when the round's fixed passes still hold.
+    ``data``: the round's model data (whether its frame follows the irradiance's laws)."""
+    changed = [d.name for d, e in zip(plan.decisions, next_plan.decisions) if d.on != e.on]
+    if next_plan.method != plan.method or next_plan.texture_size != plan.texture_size:
+        changed.append("method or texture size")
+    elif plan.method == Method.TEXTURE_SPACE:
+        if len(next_plan.variances) != len(plan.variances):
+            changed.append("number of Gaussians")
+        elif (moved := np.max(np.abs(np.log(next_plan.variances / plan.variances)))) > 0.1:
+            changed.append(f"Gaussian variances (moved by up to {100 * moved:.0f} %)")
+        # The fixed passes hold the irradiance scaled by the round's own laws; a move below
+        # LAW_REPLAN changes every pixel by less than that. At 1 % (a round of blurs fewer;
+        # the test suite's fits were 1.5-3x faster) a held law biased the gain fit by 4 errors.
+        # The frame follows the irradiance's laws itself, read at each pixel, except under
+        # translucent shadow maps (jsss.render.linear_frame): a move re-plans past LAW_FOLLOWED.
+        laws = LAW_FOLLOWED if _follows_laws(data) else LAW_REPLAN
+        if plan.on(Pass.OBLIQUE_INCIDENCE) and (moved := _incidence_moved(scene, next_scene)) > laws:
+            changed.append(f"oblique-incidence law (moved by up to {100 * moved:.2f} %)")
+        if plan.on(Pass.DEPOSIT_DEPTH) and (moved := abs(deposit_change(next_scene)[0]
+                                                      - deposit_change(scene)[0])) > laws:
+            changed.append(f"deposit depth (irradiance under the lamp moved by {100 * moved:.2f} %)")
+        if plan.on(Pass.LAST_LEG) and (moved := abs(last_leg_change(next_scene)[0]
+                                                 - last_leg_change(scene)[0])) > LAW_REPLAN:
+            changed.append(f"last leg (its change under the lamp or at the rim moved by {100 * moved:.2f} %)")
+        if plan.on(Pass.FIRST_LEG) and (moved := abs(first_leg_change(next_scene)[0]
+                                                  - first_leg_change(scene)[0])) > LAW_REPLAN:
+            changed.append(f"first leg (its change at the rim moved by {100 * moved:.2f} %)")
+    return changed
+
+
+@eqx.filter_jit
+def _cost(residuals, theta, args):
+    """The fit's objective at ``theta``: the sum of squared (whitened, robust) residuals."""
+    r = residuals(theta, args)
+    return jnp.sum(r * r)
+
+
+@eqx.filter_jit
+def _jacobian(residuals, theta, args):
+    return jax.jacfwd(residuals)(theta, args)
+
+
 @eqx.filter_jit
 def _solve(residuals, theta0, args, *, max_steps, rtol, atol):
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
@@ -808,8 +855,10 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         (:func:`_plan_error_covariance`). 0 for a photo this renderer made itself (the errors are
         then the noise's alone).
     max_steps, replans, unconstrained
-        Solver steps per round; re-plans of the variances; the relative standard error above
-        which a parameter is reported as not constrained by the image.
+        Solver steps per round; re-plans of the variances (a round whose estimate fits worse on
+        its own plan than its start did on the start's is not kept, and ``history`` says so); the
+        relative standard error above which a parameter is reported as not constrained by the
+        image.
     block : int
         Compare photo and render summed over ``block`` x ``block`` pixel tiles (default 1:
         per pixel). For heavy-tailed noise, such as a path tracer's fireflies, whose
@@ -961,19 +1010,19 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         medium = _medium(theta, eta)
         return render(medium, data, jnp.exp(theta[-1])) if fit_roughness else render(medium, data)
 
-    before = plan_difference = None  # the estimate's frame before a re-plan; the last re-plan's change to it
+    def model_of(fit_scene, plan):
+        """A round's forward model (render, data): the highlight's roughness an argument where fitted."""
+        render, data, shading = _model_for(fit_scene, plan, dtype, profile_model, g, shading=True)
+        if not fit_roughness:
+            return render, data
+        parts = _highlight_parts(fit_scene, plan, shading, dtype)
+        return _with_highlight(render), (data, parts, _specular_image(parts, roughness))
+
+    if fit_roughness:  # round 1's model, its highlight held at the scene's roughness until now
+        render, data = _with_highlight(render), (data, parts, held)
+    plan_difference = None  # the last re-plan's change to the estimate's frame
+    start_kept = False  # a round's estimate rejected for its start (below)
     for round_ in range(replans + 1):
-        if round_ > 0:
-            say(f"round {round_ + 1}: {plan.method}: the passes that stay fixed during the fit")
-            render, data, shading = _model_for(fit_scene, plan, dtype, profile_model, g, shading=True)
-            if fit_roughness:
-                parts = _highlight_parts(fit_scene, plan, shading, dtype)
-                held = _specular_image(parts, roughness)
-        if fit_roughness:
-            render, data = _with_highlight(render), (data, parts, held)
-        if before is not None:  # the same estimate under the new plan and the old: the plan's own error
-            plan_difference = np.asarray(draw(theta)) - before
-            before = None
         if fit_gain and not prior and round_ == 0:  # the best gain for the start: linear least squares
             model = np.asarray(draw(theta))
             w2 = np.asarray(inverse_sigma) ** 2
@@ -984,6 +1033,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         say(f"round {round_ + 1}: Levenberg-Marquardt on {int(use.sum())} pixels (the first solve compiles)")
         residuals = _residual_fn(render, fit_gain, block, prior, robust, fit_roughness)
         args = (data, target, mask, inverse_sigma, eta, exposure)
+        start = theta  # on its own plan: the round's plan was made for it
         theta, n_steps, solved, jac = _solve(residuals, theta, args, max_steps=max_steps,
                                              rtol=1e-8, atol=1e-10)
         steps += int(n_steps)
@@ -996,32 +1046,27 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         # 0.99 at a sigma_a 18 % low, so the fit stopped there).
         say(f"round {round_ + 1}: checking the plan against the estimate")
         next_scene, next_plan = plan_for(theta, method_kept)
-        changed = [d.name for d, e in zip(plan.decisions, next_plan.decisions) if d.on != e.on]
-        if next_plan.method != plan.method or next_plan.texture_size != plan.texture_size:
-            changed.append("method or texture size")
-        elif plan.method == Method.TEXTURE_SPACE:
-            if len(next_plan.variances) != len(plan.variances):
-                changed.append("number of Gaussians")
-            elif (moved := np.max(np.abs(np.log(next_plan.variances / plan.variances)))) > 0.1:
-                changed.append(f"Gaussian variances (moved by up to {100 * moved:.0f} %)")
-            # The fixed passes hold the irradiance scaled by the round's own laws; a move below
-            # LAW_REPLAN changes every pixel by less than that. At 1 % (a round of blurs fewer;
-            # the test suite's fits were 1.5-3x faster) a held law biased the gain fit by 4 errors.
-            # The frame follows the irradiance's laws itself, read at each pixel, except under
-            # translucent shadow maps (jsss.render.linear_frame): a move re-plans past LAW_FOLLOWED.
-            laws = LAW_FOLLOWED if _follows_laws(data) else LAW_REPLAN
-            if plan.on(Pass.OBLIQUE_INCIDENCE) and (moved := _incidence_moved(fit_scene, next_scene)) > laws:
-                changed.append(f"oblique-incidence law (moved by up to {100 * moved:.2f} %)")
-            if plan.on(Pass.DEPOSIT_DEPTH) and (moved := abs(deposit_change(next_scene)[0]
-                                                          - deposit_change(fit_scene)[0])) > laws:
-                changed.append(f"deposit depth (irradiance under the lamp moved by {100 * moved:.2f} %)")
-            if plan.on(Pass.LAST_LEG) and (moved := abs(last_leg_change(next_scene)[0]
-                                                     - last_leg_change(fit_scene)[0])) > LAW_REPLAN:
-                changed.append(f"last leg (its change under the lamp or at the rim moved by {100 * moved:.2f} %)")
-            if plan.on(Pass.FIRST_LEG) and (moved := abs(first_leg_change(next_scene)[0]
-                                                      - first_leg_change(fit_scene)[0])) > LAW_REPLAN:
-                changed.append(f"first leg (its change at the rim moved by {100 * moved:.2f} %)")
+        changed = _plan_changes(plan, next_plan, fit_scene, next_scene, data)
         if not changed:
+            break
+        say(f"round {round_ + 1}: the estimate's own plan moves ({', '.join(changed)}): its fixed passes")
+        next_render, next_data = model_of(next_scene, next_plan)
+        next_args = (next_data, *args[1:])
+        next_residuals = _residual_fn(next_render, fit_gain, block, prior, robust, fit_roughness)
+        before = np.asarray(draw(theta))
+        plan_difference = np.asarray(next_render(_medium(theta, eta), next_data, *(
+            [jnp.exp(theta[-1])] if fit_roughness else []))) - before
+        # The objective is each estimate's misfit on its own plan, which jumps where the plan
+        # does. A round whose estimate is worse there than its start was on the start's own
+        # plan moved along the plan's error, not the photo's: ketchup's red mean free path went
+        # 4.1 -> 8.5 -> 12 -> 13.8 mm while this misfit went 385317 -> 339895 -> 341505 -> 374322.
+        cost, start_cost = float(_cost(next_residuals, theta, next_args)), float(_cost(residuals, start, args))
+        if cost > start_cost:
+            history.append(f"round {round_ + 1}'s estimate not kept: on its own plan ({', '.join(changed)}) its "
+                           f"misfit is {cost:.7g}, above its start's {start_cost:.7g} on the start's plan; the start is "
+                           "the estimate, on its own plan, and the re-plan's change is in the errors")
+            say(history[-1])
+            theta, changed, start_kept = start, [], True
             break
         if round_ == replans:  # the plan moves still, and no round is left: the estimate is not its own plan's
             notes.append(f"the plan did not settle: re-planned {replans} times for the estimate, and the last "
@@ -1030,21 +1075,26 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
             break
         history.append(f"re-planned for the estimate after round {round_ + 1}: " + ", ".join(changed))
         say(history[-1])
-        before = np.asarray(draw(theta))
-        fit_scene, plan = next_scene, next_plan
+        fit_scene, plan, render, data = next_scene, next_plan, next_render, next_data
+    if fit_roughness:
+        parts = data[1]
     if estimate:  # the noise from the first fit's residuals, then the fit again with it
         gain_now = float(np.exp(theta[6])) if fit_gain else held_gain
         expected = gain_now * np.asarray(draw(theta))
         sigma = estimate_noise(photo - expected, expected, use)
         inverse_sigma = whitening(sigma)
         args = (data, target, mask, inverse_sigma, eta, exposure)
-        say("the photo's noise estimated from the first fit's residuals: solving again with it")
-        theta, n_steps, solved, jac = _solve(residuals, theta, args, max_steps=max_steps, rtol=1e-8, atol=1e-10)
-        steps += int(n_steps)
+        if not start_kept:  # (solved again, a kept start would move to the estimate not kept)
+            say("the photo's noise estimated from the first fit's residuals: solving again with it")
+            theta, n_steps, solved, jac = _solve(residuals, theta, args, max_steps=max_steps, rtol=1e-8, atol=1e-10)
+            steps += int(n_steps)
         level = np.median(expected[use], axis=0)
         history.append("noise estimated from the photo (adjacent residuals): "
                        + ", ".join(f"{c} {100 * s / max(v, 1e-300):.2g} %" for c, s, v in
-                                   zip("RGB", np.median(sigma[use], axis=0), level)) + " of the median pixel")
+                                   zip("RGB", np.median(sigma[use], axis=0), level)) + " of the median pixel"
+                       + ("; the kept start not solved again with it" if start_kept else ""))
+    if start_kept:
+        jac = _jacobian(residuals, theta, args)
     if model_error > 0:
         history.append(f"the errors include the renderer's own, {100 * float(model_error):g} % of each channel's "
                        "subsurface light (model_error), beside the photo's noise")

@@ -118,14 +118,16 @@ def _pulls(fit, truth):
 
 def test_a_highlight_held_at_a_wrong_roughness_biases_the_medium(shot):
     """The behaviour before: the lobe at m = 0.4 where the photo's is 0.15. The highlight's pixels
-    pull sigma_a and sigma_s' off (measured: chi2/dof 4.4, sigma_s' R 6.9 errors low), even
-    under Huber's loss. The start is the truth, so the bias is the highlight's alone."""
+    pull sigma_a and sigma_s' off by more than the 3 errors a fit may miss by (measured: chi2/dof
+    4.3, sigma_s' R 3.8 errors low; 6.9 until 2026-12-08, when the second round, worse on its own
+    plan, was kept), even under Huber's loss. The start is the truth, so the bias is the
+    highlight's alone."""
     truth, photo, wrong = shot
     fit = _fit(wrong, photo, highlight="model")
     assert fit.highlight == "model" and fit.roughness == WRONG and fit.highlight_pixels == 0
     pull_a, pull_s = _pulls(fit, truth)
     assert fit.chi2_reduced > 2, fit.chi2_reduced
-    assert max(np.abs(pull_a).max(), np.abs(pull_s).max()) > 4, (pull_a, pull_s)
+    assert max(np.abs(pull_a).max(), np.abs(pull_s).max()) > 3, (pull_a, pull_s)
 
 
 def test_the_default_fits_the_roughness_and_recovers_the_medium(shot):
