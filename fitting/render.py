@@ -1005,10 +1005,12 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
     target = jnp.asarray(np.where(use[..., None], photo, 0.0), dtype)
     mask = jnp.asarray(mask, dtype)
 
-    def draw(theta):
-        """The fit's frame (no gain) at the parameters ``theta``."""
+    def draw(theta, model=None):
+        """The fit's frame (no gain) at the parameters ``theta``, by the round's model or ``model``
+        (another plan's (render, data))."""
+        render_, data_ = (render, data) if model is None else model
         medium = _medium(theta, eta)
-        return render(medium, data, jnp.exp(theta[-1])) if fit_roughness else render(medium, data)
+        return render_(medium, data_, jnp.exp(theta[-1])) if fit_roughness else render_(medium, data_)
 
     def model_of(fit_scene, plan):
         """A round's forward model (render, data): the highlight's roughness an argument where fitted."""
@@ -1053,9 +1055,7 @@ def fit_render(scene: Scene, photo, *, sigma=None, noise="estimate", loss: str =
         next_render, next_data = model_of(next_scene, next_plan)
         next_args = (next_data, *args[1:])
         next_residuals = _residual_fn(next_render, fit_gain, block, prior, robust, fit_roughness)
-        before = np.asarray(draw(theta))
-        plan_difference = np.asarray(next_render(_medium(theta, eta), next_data, *(
-            [jnp.exp(theta[-1])] if fit_roughness else []))) - before
+        plan_difference = np.asarray(draw(theta, (next_render, next_data))) - np.asarray(draw(theta))
         # The objective is each estimate's misfit on its own plan, which jumps where the plan
         # does. A round whose estimate is worse there than its start was on the start's own
         # plan moved along the plan's error, not the photo's: ketchup's red mean free path went
